@@ -1,0 +1,25 @@
+# paretocal: one command for the demo, one for the tests. Each creates .venv when missing.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+DATA   ?= $(or $(PARETOCAL_DATA),../shared/data)
+RUN    ?= runs/demo
+
+.PHONY: demo test bench clean
+
+$(BIN)/paretocal: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	@touch $@
+
+# A full calibration of the 20 bundled KITTI raw frames from a perturbed initial extrinsic.
+demo: $(BIN)/paretocal
+	$(BIN)/paretocal perturb $(DATA)/kitti_raw/2011_09_26 --rot 5 --trans 0.2 --seed 1 --out $(RUN)/init.yaml
+	$(BIN)/paretocal calibrate $(DATA)/kitti_raw/2011_09_26 --init $(RUN)/init.yaml --out $(RUN)
+
+test: $(BIN)/paretocal
+	PARETOCAL_DATA=$(DATA) $(BIN)/python -m pytest
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

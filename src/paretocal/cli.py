@@ -1,0 +1,238 @@
+"""Command line: a thin layer that parses options, calls the library and maps errors to exits.
+
+Exit status: 0 success, 2 bad input or usage (one line on stderr naming the file or option),
+1 anything unexpected, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import typer
+
+from .errors import ParetocalError, SettingsError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Targetless camera-LiDAR calibration as a Pareto search over accuracy "
+                       "and computational cost.")
+log = logging.getLogger("paretocal")
+
+
+class Rule(str, Enum):
+    knee = "knee"
+    budget = "budget"
+    min_chamfer = "min-chamfer"
+
+
+class Chamfer(str, Enum):
+    edge_dt = "edge-dt"
+    paper = "paper"
+
+
+class Cost(str, Enum):
+    model = "model"
+    psutil = "psutil"
+
+
+class Evaluator(str, Enum):
+    auto = "auto"
+    numba = "numba"
+    numpy = "numpy"
+
+
+def _setup_logging(verbose: bool, quiet: bool) -> None:
+    level = logging.INFO if verbose else logging.ERROR if quiet else logging.WARNING
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("paretocal: %(levelname)s: %(message)s"))
+    root = logging.getLogger("paretocal")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    root.propagate = False
+
+
+class _Progress:
+    """Rich progress bars on a terminal; nothing otherwise."""
+
+    LABELS = {"features": "features", "search": "NSGA-II generations", "polish": "polish"}
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bar = None
+        self.tasks = {}
+
+    def __enter__(self):
+        if self.enabled:
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn)
+            self.bar = Progress(TextColumn("{task.description:<22}"), BarColumn(),
+                                MofNCompleteColumn(), TimeElapsedColumn(), transient=False)
+            self.bar.__enter__()
+        return self
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.bar is None:
+            return
+        if stage not in self.tasks:
+            self.tasks[stage] = self.bar.add_task(self.LABELS.get(stage, stage), total=total)
+        self.bar.update(self.tasks[stage], completed=done, total=total)
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
+
+
+def _fmt_err(e: dict | None) -> str:
+    if not e:
+        return "n/a"
+    return f"{e['rotation_deg']:.3f} deg / {e['translation_cm']:.2f} cm"
+
+
+@app.command()
+def calibrate(
+    source: Annotated[Path, typer.Argument(help="Dataset folder: KITTI raw drive or date folder, "
+                                                "KITTI object 'training', or a generic folder.")],
+    out: Annotated[Path, typer.Option("--out", help="Run directory to write.")],
+    init: Annotated[Optional[Path], typer.Option(help="Initial extrinsic (YAML/JSON with "
+                                                      "T_cam_lidar); default: the dataset's.")] = None,
+    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
+    seed: Annotated[Optional[int], typer.Option(help="Random seed (default 0).")] = None,
+    pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
+    gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
+    camera: Annotated[Optional[int], typer.Option(help="KITTI camera index 0-3 (default 2).")] = None,
+    config: Annotated[Optional[Path], typer.Option(help="Settings file (YAML/JSON) by section.")] = None,
+    budget_ms: Annotated[Optional[float], typer.Option(
+        "--budget-ms", help="Choose the best Chamfer whose modelled evaluation time is within "
+                            "this many ms, instead of the knee.")] = None,
+    rule: Annotated[Optional[Rule], typer.Option(help="Decision rule.")] = None,
+    n_min: Annotated[Optional[int], typer.Option("--n-min", help="Fewest feature points per frame.")] = None,
+    n_max: Annotated[Optional[int], typer.Option("--n-max", help="Most feature points per frame.")] = None,
+    bound_t: Annotated[Optional[float], typer.Option("--bound-t", help="Translation bound (+- m).")] = None,
+    bound_r: Annotated[Optional[float], typer.Option("--bound-r", help="Rotation bound (+- deg).")] = None,
+    chamfer: Annotated[Optional[Chamfer], typer.Option(help="Alignment objective.")] = None,
+    w_edge: Annotated[Optional[float], typer.Option("--w-edge", help="w1 of the edge term; "
+                                                    "w2 = 1 - w1 weighs the intensity term.")] = None,
+    cost: Annotated[Optional[Cost], typer.Option(help="Cost objective: fitted model or the "
+                                                      "paper's per-evaluation psutil.")] = None,
+    evaluator: Annotated[Optional[Evaluator], typer.Option(help="Objective evaluator.")] = None,
+    polish: Annotated[Optional[bool], typer.Option("--polish/--no-polish",
+                                                    help="Locally polish the front.")] = None,
+    figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Write PNG figures.")] = True,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+) -> None:
+    """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
+    from .config import load_settings
+    from .io import load_frames, read_extrinsic
+    from .io.results import write_run
+    from .pipeline import calibrate as run_calibration
+
+    _setup_logging(verbose, quiet)
+    settings = load_settings(config)
+    if budget_ms is not None and rule is None:
+        rule = Rule.budget
+    settings = settings.replace(
+        search={"pop": pop, "gens": gens, "seed": seed, "n_min": n_min, "n_max": n_max,
+                "bound_t_m": bound_t, "bound_r_deg": bound_r},
+        objective={"chamfer": chamfer.value if chamfer else None, "w_edge": w_edge,
+                   "cost": cost.value if cost else None,
+                   "evaluator": evaluator.value if evaluator else None},
+        decision={"rule": rule.value if rule else None, "budget_ms": budget_ms,
+                  "refine": polish})
+    import dataclasses
+    if camera is not None or frames is not None:
+        settings = dataclasses.replace(settings, camera=camera if camera is not None
+                                       else settings.camera,
+                                       frames=frames if frames is not None else settings.frames)
+    settings.validate()
+    T_init = read_extrinsic(init) if init is not None else None
+    loaded = load_frames(source, settings.frames, settings.camera)
+    interactive = sys.stderr.isatty() and not quiet
+    with _Progress(interactive) as progress:
+        result = run_calibration(loaded, T_init, settings, progress=progress)
+        write_run(result, out, loaded, figures=figures)
+    ref = result.reference_error
+    typer.echo(f"paretocal: {len(loaded)} frames, {result.evaluations} evaluations in "
+               f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision['rule']}), "
+               f"chamfer {result.objectives()['chamfer']:.4f}, "
+               f"{result.objectives()['ms']:.4g} ms/eval; error vs reference: {_fmt_err(ref)}; "
+               f"wrote {out}")
+
+
+@app.command()
+def perturb(
+    source: Annotated[Path, typer.Argument(help="Dataset whose own extrinsic is perturbed.")],
+    out: Annotated[Path, typer.Option("--out", help="YAML file to write (an --init file).")],
+    rot: Annotated[float, typer.Option(help="Per-axis rotation bound (+- deg).")] = 5.0,
+    trans: Annotated[float, typer.Option(help="Per-axis translation bound (+- m).")] = 0.2,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+) -> None:
+    """Write the dataset's extrinsic with a random correction, uniform per axis, as an --init file."""
+    from .geometry import correction_matrix, pose_error
+    from .io import detect_source, write_extrinsic
+
+    if rot < 0 or trans < 0:
+        raise SettingsError("--rot and --trans must not be negative")
+    src = detect_source(source, camera)
+    T_ref = src.frames[0].T_ref
+    if T_ref is None:
+        raise ParetocalError(f"{source}: the dataset has no extrinsic to perturb")
+    rng = np.random.default_rng(seed)
+    p = np.concatenate([rng.uniform(-trans, trans, 3), rng.uniform(-rot, rot, 3)])
+    T = T_ref @ correction_matrix(p)
+    e = pose_error(T, T_ref)
+    write_extrinsic(out, T, comment=(
+        f"{source} extrinsic perturbed (seed {seed}): x y z = {p[0]:+.3f} {p[1]:+.3f} "
+        f"{p[2]:+.3f} m, yaw pitch roll = {p[3]:+.2f} {p[4]:+.2f} {p[5]:+.2f} deg\n"
+        f"error vs reference: {e['rotation_deg']:.3f} deg, {e['translation_cm']:.2f} cm"))
+    typer.echo(f"paretocal: wrote {out} ({_fmt_err({k: float(v) for k, v in e.items()})} "
+               "from the reference)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``paretocal`` console script; returns the exit status."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    verbose = "--verbose" in args or "-v" in args
+    command = typer.main.get_command(app)
+    try:
+        rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
+        return int(rv) if isinstance(rv, int) else 0
+    except ParetocalError as exc:
+        print(f"paretocal: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("paretocal: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the last line of defence
+        code = getattr(exc, "exit_code", None)
+        if type(exc).__name__ == "Exit" and isinstance(code, int):
+            return code
+        if type(exc).__name__ == "Abort":
+            print("paretocal: interrupted", file=sys.stderr)
+            return 130
+        if hasattr(exc, "format_message") and isinstance(code, int):
+            # A usage error from the option parser (unknown option, bad value, ...).
+            msg = " ".join(exc.format_message().split())
+            print(f"paretocal: error: {msg}", file=sys.stderr)
+            return 2
+        if verbose:
+            import traceback
+
+            traceback.print_exc()
+        print(f"paretocal: unexpected error: {type(exc).__name__}: {exc} "
+              "(rerun with --verbose for the traceback)", file=sys.stderr)
+        return 1
+
+
+def _console() -> None:  # pragma: no cover
+    sys.exit(main())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

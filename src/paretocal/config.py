@@ -1,0 +1,186 @@
+"""Every setting of a calibration, as frozen dataclasses loadable from a YAML/JSON file.
+
+A config file mirrors the sections below, e.g.::
+
+    search: {pop: 400, gens: 150, seed: 3}
+    objective: {w_edge: 0.8}
+
+Unknown sections or keys are errors (a typo must not silently fall back to a default).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from .errors import SettingsError
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """Image and LiDAR feature extraction (see :mod:`paretocal.features`)."""
+
+    blur_sigma: float = 1.0          #: Gaussian sigma (px) before Canny
+    canny_low: float = 50.0          #: Canny hysteresis thresholds
+    canny_high: float = 150.0
+    depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
+    cross_ring: bool = True          #: also detect edges against the rings above and below
+    cross_jump_m: float = 0.3        #: across rings: jump > max(cross_jump_m, cross_jump_rel * r)
+    cross_jump_rel: float = 0.25
+    intensity_jump: float = 0.3      #: reflectance jump for an intensity edge
+    min_range_m: float = 1.5
+    max_range_m: float = 70.0
+    smooth_ratio: float = 1.0        #: smooth points kept per depth edge (for the contrast term)
+    ring_method: str = "auto"        #: "auto", "scan" or "elevation"
+    view_margin_px: float = 60.0     #: keep feature points projecting this far outside the image
+    z_min: float = 0.1               #: minimum depth (m) of a projectable point
+    grid: tuple[int, int] = (8, 4)   #: image cells (columns, rows) stratifying the point order
+
+
+@dataclass(frozen=True)
+class ObjectiveSettings:
+    """The two objectives (see :mod:`paretocal.objective`)."""
+
+    chamfer: str = "edge-dt"         #: "edge-dt" (default, sound) or "paper" (as written)
+    truncation_px: float = 10.0      #: robust cap of the per-point distance (px)
+    outside: str = "mean"            #: charge for points out of view: "mean" DT or "truncation"
+    w_edge: float = 1.0              #: w1, weight of the depth-edge term; w2 = 1 - w1 (intensity)
+    contrast: float = 1.0            #: weight of the smooth-point term subtracted (0 disables)
+    ucb_k: float = 4.6
+    cost: str = "model"              #: "model" (deterministic) or "psutil" (paper, measured)
+    evaluator: str = "auto"          #: "auto", "numba" or "numpy"
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """NSGA-II over ``[x, y, z, yaw, pitch, roll, n]`` (see :mod:`paretocal.search`)."""
+
+    pop: int = 300
+    gens: int = 120
+    seed: int = 0
+    bound_t_m: float = 1.5           #: +- bound of x, y, z (m)
+    bound_r_deg: float = 25.0        #: +- bound of yaw, pitch, roll (deg)
+    n_min: int | None = None         #: feature points per frame; None -> automatic
+    n_max: int | None = None
+    sbx_prob: float = 0.9
+    sbx_eta: float = 15.0
+    pm_eta: float = 20.0
+    eliminate_duplicates: bool = False
+    include_init: bool = True        #: seed the population with the zero correction
+
+
+@dataclass(frozen=True)
+class DecisionSettings:
+    """How one solution is chosen from the front (see :mod:`paretocal.decide`)."""
+
+    rule: str = "knee"               #: "knee", "budget" or "min-chamfer"
+    budget_ms: float | None = None   #: with rule "budget": modelled evaluation time limit (ms)
+    refine: bool = True              #: polish the chosen pose at its n (kept only if better)
+    refine_evals: int = 1500
+
+
+@dataclass(frozen=True)
+class Settings:
+    """All settings of one calibration run."""
+
+    features: FeatureSettings = field(default_factory=FeatureSettings)
+    objective: ObjectiveSettings = field(default_factory=ObjectiveSettings)
+    search: SearchSettings = field(default_factory=SearchSettings)
+    decision: DecisionSettings = field(default_factory=DecisionSettings)
+    camera: int = 2
+    frames: str | None = None
+
+    def replace(self, **sections: dict[str, Any]) -> "Settings":
+        """A copy with some fields of some sections replaced (``None`` values are ignored)."""
+        out = self
+        for name, values in sections.items():
+            values = {k: v for k, v in values.items() if v is not None}
+            if not values:
+                continue
+            current = getattr(out, name)
+            if dataclasses.is_dataclass(current):
+                _check_keys(type(current), values, name)
+                out = dataclasses.replace(out, **{name: dataclasses.replace(current, **values)})
+            else:
+                raise SettingsError(f"unknown settings section {name!r}")
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def validate(self) -> "Settings":
+        """Raise :class:`SettingsError` naming the option when a value is out of range."""
+        s, o, f, d = self.search, self.objective, self.features, self.decision
+        if s.pop < 4:
+            raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
+        if s.gens < 1:
+            raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
+        if not s.bound_t_m > 0 or not s.bound_r_deg > 0:
+            raise SettingsError("search bounds must be positive (bound_t_m, bound_r_deg)")
+        if s.bound_r_deg > 90:
+            raise SettingsError(f"bound_r_deg {s.bound_r_deg}: at most 90 degrees")
+        if s.n_min is not None and s.n_max is not None and s.n_min > s.n_max:
+            raise SettingsError(f"--n-min {s.n_min} is larger than --n-max {s.n_max}")
+        if s.n_min is not None and s.n_min < 1:
+            raise SettingsError(f"--n-min {s.n_min}: must be at least 1")
+        if not 0.0 <= o.w_edge <= 1.0:
+            raise SettingsError(f"--w-edge {o.w_edge}: must lie in [0, 1] (w2 = 1 - w1)")
+        if o.chamfer not in ("edge-dt", "paper"):
+            raise SettingsError(f"--chamfer {o.chamfer!r}: choose 'edge-dt' or 'paper'")
+        if o.outside not in ("mean", "truncation"):
+            raise SettingsError(f"outside {o.outside!r}: choose 'mean' or 'truncation'")
+        if o.cost not in ("model", "psutil"):
+            raise SettingsError(f"--cost {o.cost!r}: choose 'model' or 'psutil'")
+        if o.evaluator not in ("auto", "numba", "numpy"):
+            raise SettingsError(f"--evaluator {o.evaluator!r}: choose 'auto', 'numba' or 'numpy'")
+        if not o.truncation_px > 0:
+            raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
+        if o.ucb_k < 0 or o.contrast < 0:
+            raise SettingsError("ucb_k and contrast must not be negative")
+        if d.rule not in ("knee", "budget", "min-chamfer"):
+            raise SettingsError(f"--rule {d.rule!r}: choose 'knee', 'budget' or 'min-chamfer'")
+        if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
+            raise SettingsError("--budget-ms must be a positive number of milliseconds")
+        if f.ring_method not in ("auto", "scan", "elevation"):
+            raise SettingsError(f"ring_method {f.ring_method!r}: choose auto, scan or elevation")
+        if f.canny_low > f.canny_high:
+            raise SettingsError("canny_low must not exceed canny_high")
+        return self
+
+
+def _check_keys(cls, values: dict, section: str) -> None:
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise SettingsError(f"unknown setting(s) {', '.join(unknown)} in section {section!r} "
+                            f"(known: {', '.join(sorted(names))})")
+
+
+def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
+    """Settings from a YAML/JSON config file laid out by section, over ``base``."""
+    from .io.readers import read_mapping
+
+    settings = base or Settings()
+    if path is None:
+        return settings
+    data = read_mapping(Path(path))
+    top = {f.name for f in fields(Settings)}
+    unknown = sorted(set(data) - top)
+    if unknown:
+        raise SettingsError(f"{path}: unknown section(s) {', '.join(unknown)} "
+                            f"(known: {', '.join(sorted(top))})")
+    sections = {k: v for k, v in data.items() if isinstance(v, dict)}
+    scalars = {k: v for k, v in data.items() if not isinstance(v, dict)}
+    try:
+        settings = settings.replace(**sections)
+        if "grid" in sections.get("features", {}):
+            settings = settings.replace(features={"grid": tuple(sections["features"]["grid"])})
+        if scalars:
+            settings = dataclasses.replace(settings, **scalars)
+    except SettingsError as exc:
+        raise SettingsError(f"{path}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise SettingsError(f"{path}: {exc}") from None
+    return settings

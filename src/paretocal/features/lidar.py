@@ -1,0 +1,178 @@
+"""LiDAR features: depth-discontinuity edges, reflectance edges and smooth-surface points.
+
+Edges are found along each laser ring (neighbouring returns of one laser) and across rings
+(the return of the laser above or below at the same azimuth). Only the near side of a depth jump
+is an edge (Levinson & Thrun, RSS 2013): the far side lies on the background. An edge point is
+placed at the angular midpoint between the near return and its far neighbour, at the near range:
+the true occluding contour lies between the two rays, and placing it on the near ray would bias
+the calibration by half a beam spacing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .rings import azimuth, elevation_deg, recover_rings
+
+DEPTH_EDGE, INTENSITY_EDGE, SMOOTH = 0, 1, 2
+GROUP_NAMES = ("depth_edge", "intensity_edge", "smooth")
+
+
+@dataclass(eq=False)
+class LidarFeatures:
+    """Feature points of one sweep, in the LiDAR frame.
+
+    Attributes
+    ----------
+    xyz : ndarray, shape (M, 3), float64
+        Positions in metres.
+    group : ndarray, shape (M,), int8
+        ``DEPTH_EDGE``, ``INTENSITY_EDGE`` or ``SMOOTH``.
+    strength : ndarray, shape (M,), float64
+        Depth jump in metres (depth edges), reflectance jump (intensity edges), 0 (smooth).
+    n_rings : int
+        Rings recovered from the sweep.
+    """
+
+    xyz: np.ndarray
+    group: np.ndarray
+    strength: np.ndarray
+    n_rings: int
+
+
+def _midpoint_dir(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Points at range ``r`` along the bisector of the rays through ``p`` and ``q`` (rows)."""
+    a = p / np.linalg.norm(p, axis=1, keepdims=True)
+    b = q / np.linalg.norm(q, axis=1, keepdims=True)
+    m = a + b
+    return m / np.linalg.norm(m, axis=1, keepdims=True) * r[:, None]
+
+
+def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
+                   cross_jump_m: float = 0.3, cross_jump_rel: float = 0.25,
+                   intensity_jump: float = 0.3, min_range_m: float = 1.5,
+                   max_range_m: float = 70.0, max_gap_deg: float = 1.0,
+                   smooth_ratio: float = 1.0, ring_method: str = "auto",
+                   rng: np.random.Generator | int | None = 0) -> LidarFeatures:
+    """Extract feature points from one sweep.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 4)
+        ``x, y, z`` in metres and reflectance, in scan order when available.
+    depth_jump_m : float
+        Minimum range difference to the next return along the ring for a depth edge.
+    cross_ring : bool
+        Also detect edges against the ring above and below (horizontal contours).
+    cross_jump_m, cross_jump_rel : float
+        Across rings the far return must be farther by ``max(cross_jump_m, cross_jump_rel * r)``
+        (the relative part keeps the ground, seen at grazing angles, from making edges).
+    intensity_jump : float
+        Minimum reflectance difference between neighbours on one surface for an intensity edge.
+    min_range_m, max_range_m : float
+        Returns outside this range are ignored.
+    max_gap_deg : float
+        Neighbours farther apart in azimuth are not compared (missing returns in between).
+    smooth_ratio : float
+        Smooth-surface points kept, as a multiple of the depth edges found (0 keeps none).
+    ring_method : {"auto", "scan", "elevation"}
+    rng : numpy Generator or seed
+        Drives the subsampling of smooth points.
+
+    Returns
+    -------
+    LidarFeatures
+    """
+    rng = np.random.default_rng(rng)
+    pts = np.asarray(points, dtype=np.float64)
+    xyz_all = pts[:, :3]
+    rng_all = np.linalg.norm(xyz_all, axis=1)
+    ring = recover_rings(pts, ring_method)
+    n_rings = int(ring.max()) + 1
+    keep = (rng_all > min_range_m) & (rng_all < max_range_m)
+    xyz, refl, r, ring = xyz_all[keep], pts[keep, 3], rng_all[keep], ring[keep]
+    psi = azimuth(xyz)
+    order = np.lexsort((psi, ring))
+    xyz, refl, r, ring, psi = xyz[order], refl[order], r[order], ring[order], psi[order]
+    n = len(xyz)
+    if n < 3:
+        empty = np.zeros((0, 3))
+        return LidarFeatures(empty, np.zeros(0, np.int8), np.zeros(0), n_rings)
+
+    # Circular neighbours within each ring (the ring's start follows its end).
+    first = np.r_[True, ring[1:] != ring[:-1]]
+    last = np.r_[ring[1:] != ring[:-1], True]
+    start_of = np.maximum.accumulate(np.where(first, np.arange(n), 0))
+    end_idx = np.flatnonzero(last)
+    end_of = end_idx[np.cumsum(first) - 1]
+    nxt = np.where(last, start_of, np.arange(n) + 1)
+    prv = np.where(first, end_of, np.arange(n) - 1)
+    gap = np.radians(max_gap_deg)
+    dpsi_n = np.mod(psi[nxt] - psi, 2 * np.pi)
+    dpsi_p = np.mod(psi - psi[prv], 2 * np.pi)
+    ok_n = (dpsi_n < gap) & (nxt != np.arange(n))
+    ok_p = (dpsi_p < gap) & (prv != np.arange(n))
+
+    # Along-ring depth edges: the near side of a jump to either neighbour.
+    jump_n = np.where(ok_n, r[nxt] - r, 0.0)
+    jump_p = np.where(ok_p, r[prv] - r, 0.0)
+    jump = np.maximum(jump_n, jump_p)
+    is_edge = jump > depth_jump_m
+    far = np.where(jump_n >= jump_p, nxt, prv)
+    edge_pos = np.zeros_like(xyz)
+    edge_pos[is_edge] = _midpoint_dir(xyz[is_edge], xyz[far[is_edge]], r[is_edge])
+    strength = np.where(is_edge, jump, 0.0)
+
+    if cross_ring:
+        # Rank rings by elevation so that "above" and "below" are geometric neighbours.
+        el = elevation_deg(xyz)
+        ids = np.unique(ring)
+        med = np.array([np.median(el[ring == k]) for k in ids])
+        by_el = ids[np.argsort(-med)]
+        seg = {k: np.flatnonzero(ring == k) for k in ids}
+        for a, b in zip(by_el[:-1], by_el[1:]):
+            for near, other in ((seg[a], seg[b]), (seg[b], seg[a])):
+                j, dpsi = _nearest_azimuth(psi[near], psi[other])
+                cand = other[j]
+                thr = np.maximum(cross_jump_m, cross_jump_rel * r[near])
+                cj = r[cand] - r[near]
+                hit = (dpsi < gap) & (cj > thr) & ~is_edge[near]
+                idx = near[hit]
+                edge_pos[idx] = _midpoint_dir(xyz[idx], xyz[cand[hit]], r[idx])
+                strength[idx] = cj[hit]
+                is_edge[idx] = True
+
+    # Reflectance edges on one surface (no depth jump): each neighbour pair once.
+    same_surface = ok_n & (np.abs(r[nxt] - r) < np.maximum(0.2, 0.03 * r))
+    dref = np.abs(refl[nxt] - refl)
+    is_int = same_surface & (dref > intensity_jump) & ~is_edge & ~is_edge[nxt]
+    int_pos = 0.5 * (xyz[is_int] + xyz[nxt[is_int]])
+
+    # Smooth points: both neighbours on the same surface, far from any edge.
+    smooth_ok = (ok_n & ok_p & (np.abs(jump_n) < 0.05 * r + 0.05)
+                 & (np.abs(jump_p) < 0.05 * r + 0.05) & ~is_edge & ~is_int)
+    sm_idx = np.flatnonzero(smooth_ok)
+    n_smooth = min(len(sm_idx), int(round(smooth_ratio * is_edge.sum())))
+    sm_idx = np.sort(rng.choice(sm_idx, size=n_smooth, replace=False)) if n_smooth else sm_idx[:0]
+
+    out_xyz = np.vstack([edge_pos[is_edge], int_pos, xyz[sm_idx]])
+    group = np.concatenate([np.full(is_edge.sum(), DEPTH_EDGE, np.int8),
+                            np.full(len(int_pos), INTENSITY_EDGE, np.int8),
+                            np.full(len(sm_idx), SMOOTH, np.int8)])
+    strength = np.concatenate([strength[is_edge], dref[is_int], np.zeros(len(sm_idx))])
+    return LidarFeatures(out_xyz, group, strength, n_rings)
+
+
+def _nearest_azimuth(psi_q: np.ndarray, psi_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each query azimuth, the index of the nearest azimuth in ``psi_ref`` (sorted,
+    circular) and the angular distance."""
+    m = len(psi_ref)
+    pos = np.searchsorted(psi_ref, psi_q)
+    hi = pos % m
+    lo = (pos - 1) % m
+    d_hi = np.abs(np.mod(psi_ref[hi] - psi_q + np.pi, 2 * np.pi) - np.pi)
+    d_lo = np.abs(np.mod(psi_ref[lo] - psi_q + np.pi, 2 * np.pi) - np.pi)
+    take_lo = d_lo < d_hi
+    return np.where(take_lo, lo, hi), np.where(take_lo, d_lo, d_hi)

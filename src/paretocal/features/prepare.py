@@ -1,0 +1,108 @@
+"""Per-frame features ready for the objective: visible at the initial guess, in a fixed order.
+
+The first ``n`` points of the order are the ``n`` points a candidate uses, so solutions with
+different ``n`` are nested and the cost of an evaluation grows with ``n``. The order is a seeded
+random permutation stratified by feature group and by image cell (at the initial guess): any
+prefix holds each group and each part of the image in proportion, so a small ``n`` is a
+representative sample rather than a lucky or an unlucky one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera import Camera, in_image, project
+from ..config import FeatureSettings, ObjectiveSettings
+from ..io.frame import Frame
+from .image import ImageFeatures, image_features
+from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
+
+
+@dataclass(eq=False)
+class FrameFeatures:
+    """Everything the objective needs from one frame.
+
+    Attributes
+    ----------
+    name : str
+    camera : Camera
+    image : ImageFeatures
+    xyz : ndarray, shape (M, 3), float64
+        Feature points in the LiDAR frame, in evaluation order (first ``n`` used).
+    group : ndarray, shape (M,), int8
+    n_rings : int
+    """
+
+    name: str
+    camera: Camera
+    image: ImageFeatures
+    xyz: np.ndarray
+    group: np.ndarray
+    n_rings: int
+
+    def counts(self) -> dict[str, int]:
+        """Number of points per feature group."""
+        return {g: int((self.group == i).sum()) for i, g in enumerate(GROUP_NAMES)}
+
+
+def stratified_order(group: np.ndarray, cell: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A permutation whose prefixes hold every (group, cell) stratum in proportion.
+
+    Each stratum's points get keys ``(rank + u) / size`` with a random rank order and
+    ``u ~ U(0, 1)``; sorting all keys interleaves the strata evenly.
+    """
+    m = len(group)
+    if m == 0:
+        return np.zeros(0, dtype=np.int64)
+    stratum = group.astype(np.int64) * (int(cell.max()) + 1) + cell
+    perm = rng.permutation(m)
+    s = stratum[perm]
+    order_in = np.argsort(s, kind="stable")
+    sizes = np.bincount(s)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    rank = np.empty(m, dtype=np.int64)
+    rank[order_in] = np.arange(m) - starts[s[order_in]]
+    key = (rank + rng.random(m)) / sizes[s]
+    return perm[np.argsort(key, kind="stable")]
+
+
+def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
+                  objective: ObjectiveSettings, rng: np.random.Generator) -> FrameFeatures:
+    """Extract, filter and order the features of one frame.
+
+    Only feature points that project into the image grown by ``view_margin_px`` at ``T_init``
+    are kept: the objective compares what both sensors see, and points far outside the view
+    would reward poses that pull unseen structure into the image.
+    """
+    img = image_features(frame.image, features.blur_sigma, features.canny_low,
+                         features.canny_high, objective.truncation_px)
+    lf: LidarFeatures = lidar_features(
+        frame.points, depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
+        cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
+        intensity_jump=features.intensity_jump, min_range_m=features.min_range_m,
+        max_range_m=features.max_range_m,
+        smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,
+        ring_method=features.ring_method, rng=rng)
+    keep = _wanted_groups(lf.group, objective)
+    uv, z, _ = project(lf.xyz, frame.camera, T_init, features.z_min)
+    keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
+                                            features.view_margin_px)
+    xyz, group, uv = lf.xyz[keep], lf.group[keep], uv[keep]
+    gx, gy = features.grid
+    cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
+    cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
+    order = stratified_order(group, cv * gx + cu, rng)
+    return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], lf.n_rings)
+
+
+def _wanted_groups(group: np.ndarray, objective: ObjectiveSettings) -> np.ndarray:
+    """Groups with zero weight are dropped, so they cost nothing."""
+    from .lidar import DEPTH_EDGE, INTENSITY_EDGE, SMOOTH
+
+    want = np.zeros(3, dtype=bool)
+    want[DEPTH_EDGE] = objective.w_edge > 0
+    want[INTENSITY_EDGE] = objective.w_edge < 1
+    want[SMOOTH] = objective.contrast > 0
+    return want[group]

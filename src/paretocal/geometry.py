@@ -1,0 +1,173 @@
+"""Rigid-body geometry: ZYX Euler rotations, SE(3) algebra, the search correction, pose errors.
+
+Conventions (INTERFACES.md section 1): ``T_cam_lidar`` maps LiDAR points into the camera frame,
+and the search variables form a correction applied in the LiDAR frame,
+``T = T_init @ D(x, y, z, yaw, pitch, roll)`` with ``D = [Rz(yaw) Ry(pitch) Rx(roll) | (x, y, z)]``.
+Angles are in degrees in every public function; translations in metres.
+All functions are batched over leading axes where the docstring says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+
+
+def rotation_zyx(yaw_deg, pitch_deg, roll_deg) -> np.ndarray:
+    """Rotation matrices ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
+
+    Parameters
+    ----------
+    yaw_deg, pitch_deg, roll_deg : array_like, shape (...)
+        Angles in degrees, broadcast together.
+
+    Returns
+    -------
+    R : ndarray, shape (..., 3, 3)
+    """
+    y, p, r = np.broadcast_arrays(*(np.radians(np.asarray(a, dtype=np.float64))
+                                    for a in (yaw_deg, pitch_deg, roll_deg)))
+    cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
+    R = np.empty(y.shape + (3, 3))
+    R[..., 0, 0] = cy * cp
+    R[..., 0, 1] = cy * sp * sr - sy * cr
+    R[..., 0, 2] = cy * sp * cr + sy * sr
+    R[..., 1, 0] = sy * cp
+    R[..., 1, 1] = sy * sp * sr + cy * cr
+    R[..., 1, 2] = sy * sp * cr - cy * sr
+    R[..., 2, 0] = -sp
+    R[..., 2, 1] = cp * sr
+    R[..., 2, 2] = cp * cr
+    return R
+
+
+def euler_zyx(R: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`rotation_zyx`: (yaw, pitch, roll) in degrees, shape (..., 3).
+
+    Pitch is taken in [-90, 90] degrees.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    return np.degrees(np.stack([yaw, pitch, roll], axis=-1))
+
+
+def correction_matrix(params: np.ndarray) -> np.ndarray:
+    """The correction ``D`` for search variables ``(x, y, z, yaw, pitch, roll)``.
+
+    Parameters
+    ----------
+    params : array_like, shape (..., 6) or more columns
+        Metres and degrees; columns beyond the sixth (such as ``n``) are ignored.
+
+    Returns
+    -------
+    D : ndarray, shape (..., 4, 4)
+    """
+    params = np.asarray(params, dtype=np.float64)
+    D = np.zeros(params.shape[:-1] + (4, 4))
+    D[..., :3, :3] = rotation_zyx(params[..., 3], params[..., 4], params[..., 5])
+    D[..., :3, 3] = params[..., :3]
+    D[..., 3, 3] = 1.0
+    return D
+
+
+def correction_params(D: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`correction_matrix`: ``(x, y, z, yaw, pitch, roll)``, shape (..., 6)."""
+    D = np.asarray(D, dtype=np.float64)
+    return np.concatenate([D[..., :3, 3], euler_zyx(D[..., :3, :3])], axis=-1)
+
+
+def apply_correction(T_init: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """``T_init @ D(params)`` for a batch of corrections, shape (..., 4, 4)."""
+    return np.asarray(T_init, dtype=np.float64) @ correction_matrix(params)
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of rigid transforms, shape (..., 4, 4)."""
+    T = np.asarray(T, dtype=np.float64)
+    Ti = np.zeros_like(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    Ti[..., :3, :3] = Rt
+    Ti[..., :3, 3] = -(Rt @ T[..., :3, 3, None])[..., 0]
+    Ti[..., 3, 3] = 1.0
+    return Ti
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to points of shape (N, 3) (extra columns ignored); returns (N, 3)."""
+    T = np.asarray(T, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)[:, :3]
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
+    """Angle of rotation matrices in degrees, shape (...). Stable near 0 and 180 degrees."""
+    R = np.asarray(R, dtype=np.float64)
+    # atan2(|axis * sin|, cos) is accurate near zero, where arccos((tr - 1) / 2) is not.
+    s = 0.5 * np.linalg.norm(np.stack([R[..., 2, 1] - R[..., 1, 2],
+                                       R[..., 0, 2] - R[..., 2, 0],
+                                       R[..., 1, 0] - R[..., 0, 1]], axis=-1), axis=-1)
+    c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
+    return np.degrees(np.arctan2(s, c))
+
+
+def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
+    """Error of estimated extrinsics against a reference (INTERFACES.md section 1).
+
+    Parameters
+    ----------
+    T_est : array_like, shape (..., 4, 4)
+    T_ref : array_like, shape (4, 4)
+
+    Returns
+    -------
+    dict
+        ``rotation_deg``: angle of ``R_est^T R_ref``; ``translation_cm``: ``|t_est - t_ref|``;
+        ``yaw_deg``, ``pitch_deg``, ``roll_deg``: ZYX angles of the residual rotation
+        ``R_ref^T R_est`` expressed in the LiDAR frame (the search's own axes);
+        ``x_cm``, ``y_cm``, ``z_cm``: ``t_est - t_ref`` in the camera frame.
+    """
+    T_est = np.asarray(T_est, dtype=np.float64)
+    T_ref = np.asarray(T_ref, dtype=np.float64)
+    R_est, R_ref = T_est[..., :3, :3], T_ref[:3, :3]
+    dR = np.swapaxes(R_est, -1, -2) @ R_ref
+    dt = (T_est[..., :3, 3] - T_ref[:3, 3]) * 100.0
+    ypr = euler_zyx(R_ref.T @ R_est)
+    return {
+        "rotation_deg": rotation_angle_deg(dR),
+        "translation_cm": np.linalg.norm(dt, axis=-1),
+        "yaw_deg": ypr[..., 0], "pitch_deg": ypr[..., 1], "roll_deg": ypr[..., 2],
+        "x_cm": dt[..., 0], "y_cm": dt[..., 1], "z_cm": dt[..., 2],
+    }
+
+
+def check_rigid(T, name: str, tol: float = 1e-4) -> np.ndarray:
+    """Validate a 4x4 rigid transform read from a file and return it as float64.
+
+    Raises :class:`InputError` naming ``name`` when the shape is wrong, values are not finite,
+    the bottom row is not ``[0, 0, 0, 1]`` or the rotation block is not a proper rotation.
+    """
+    try:
+        T = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name}: T_cam_lidar is not a numeric matrix ({exc})") from None
+    if T.shape == (3, 4):
+        T = np.vstack([T, [0.0, 0.0, 0.0, 1.0]])
+    if T.shape != (4, 4):
+        raise InputError(f"{name}: T_cam_lidar must be 4x4 (or 3x4), got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise InputError(f"{name}: T_cam_lidar contains NaN or infinite values")
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise InputError(f"{name}: the last row of T_cam_lidar must be [0, 0, 0, 1]")
+    R = T[:3, :3]
+    err = np.abs(R.T @ R - np.eye(3)).max()
+    if err > tol or np.linalg.det(R) < 0:
+        raise InputError(f"{name}: the rotation block of T_cam_lidar is not a rotation matrix "
+                         f"(|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4f})")
+    # Re-orthonormalise so that 6-7 significant digits in a file do not accumulate.
+    U, _, Vt = np.linalg.svd(R)
+    T[:3, :3] = U @ Vt
+    return T

@@ -1,0 +1,256 @@
+"""The three input layouts of INTERFACES.md section 2, detected from the source folder.
+
+Each layout lists its frames (stem -> image path, points path) and knows the camera and the
+dataset's own extrinsic; :func:`load_frames` selects and reads the frames.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..camera import Camera
+from ..errors import InputError, SettingsError
+from ..geometry import check_rigid
+from .frame import Frame
+from .readers import (IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, read_image,
+                      read_kitti_calib, read_mapping, read_points)
+
+
+@dataclass
+class FrameFiles:
+    """Paths of one frame before reading, with its calibration."""
+
+    name: str
+    image_path: Path
+    points_path: Path
+    camera: Camera
+    T_ref: np.ndarray | None
+    dist: np.ndarray | None = None  # OpenCV distortion of the raw image, if any
+
+
+@dataclass
+class Source:
+    """A detected dataset: its layout name and its frames in stem order."""
+
+    layout: str
+    root: Path
+    frames: list[FrameFiles]
+
+
+def _pair(root: Path, image_dir: Path, points_dir: Path,
+          image_suffixes=IMAGE_SUFFIXES, point_suffixes=POINT_SUFFIXES) -> list[tuple[str, Path, Path]]:
+    """Pair images and point clouds by stem; fail if the folders share no stem."""
+    if not image_dir.is_dir():
+        raise InputError(f"{image_dir}: image folder not found")
+    if not points_dir.is_dir():
+        raise InputError(f"{points_dir}: point cloud folder not found")
+    images = {p.stem: p for p in sorted(image_dir.iterdir())
+              if p.suffix.lower() in image_suffixes}
+    points = {p.stem: p for p in sorted(points_dir.iterdir())
+              if p.suffix.lower() in point_suffixes}
+    common = sorted(set(images) & set(points))
+    if not common:
+        raise InputError(f"{root}: no frame pairs: {len(images)} images in {image_dir} and "
+                         f"{len(points)} point clouds in {points_dir} share no file stem")
+    return [(s, images[s], points[s]) for s in common]
+
+
+def _camera_from_P(P: np.ndarray, width: int, height: int) -> tuple[Camera, np.ndarray]:
+    """Split a KITTI rectified projection ``P = K [I | b]`` into a camera and the offset ``[I | b]``.
+
+    KITTI's ``P_rect_0N`` carries the stereo baseline in its last column; folding it into the
+    extrinsic keeps the camera a plain pinhole, and ``K @ T[:3]`` reproduces ``P @ ...`` exactly.
+    """
+    K = P[:, :3].copy()
+    B = np.eye(4)
+    B[:3, 3] = np.linalg.solve(K, P[:, 3])
+    return Camera(K=K, width=int(width), height=int(height)), B
+
+
+def _rect4(R: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T
+
+
+def _kitti_raw(root: Path, camera_index: int) -> Source:
+    drive = root
+    if not drive.name.endswith("_sync"):
+        drives = sorted(p for p in root.iterdir() if p.is_dir() and p.name.endswith("_sync"))
+        if len(drives) != 1:
+            raise InputError(f"{root}: a KITTI raw date folder must hold exactly one *_sync drive "
+                             f"(found {len(drives)}); pass the drive folder instead")
+        drive = drives[0]
+    date = drive.parent
+    c2c_path, v2c_path = date / "calib_cam_to_cam.txt", date / "calib_velo_to_cam.txt"
+    c2c, v2c = read_kitti_calib(c2c_path), read_kitti_calib(v2c_path)
+    P = calib_matrix(c2c, f"P_rect_0{camera_index}", (3, 4), c2c_path)
+    R_rect = calib_matrix(c2c, "R_rect_00", (3, 3), c2c_path)
+    size = calib_matrix(c2c, f"S_rect_0{camera_index}", (1, 2), c2c_path)[0]
+    Tr = np.eye(4)
+    Tr[:3, :3] = calib_matrix(v2c, "R", (3, 3), v2c_path)
+    Tr[:3, 3] = calib_matrix(v2c, "T", (1, 3), v2c_path)[0]
+    cam, B = _camera_from_P(P, size[0], size[1])
+    T_ref = check_rigid(B @ _rect4(R_rect) @ Tr, str(v2c_path))
+    pairs = _pair(drive, drive / f"image_0{camera_index}" / "data",
+                  drive / "velodyne_points" / "data", point_suffixes=(".bin",))
+    return Source("kitti_raw", drive, [FrameFiles(s, i, p, cam, T_ref) for s, i, p in pairs])
+
+
+def _kitti_object(root: Path, camera_index: int) -> Source:
+    if camera_index not in (2, 3):
+        raise SettingsError(f"--camera {camera_index}: the KITTI object layout has cameras 2 and 3")
+    pairs = _pair(root, root / f"image_{camera_index}", root / "velodyne", point_suffixes=(".bin",))
+    frames = []
+    for stem, img, pts in pairs:
+        cpath = root / "calib" / f"{stem}.txt"
+        calib = read_kitti_calib(cpath)
+        P = calib_matrix(calib, f"P{camera_index}", (3, 4), cpath)
+        R0 = calib_matrix(calib, "R0_rect", (3, 3), cpath)
+        Tr = np.vstack([calib_matrix(calib, "Tr_velo_to_cam", (3, 4), cpath), [0, 0, 0, 1]])
+        # The object benchmark's calib files carry no image size: read it from the image header.
+        shape = _image_shape(img)
+        cam, B = _camera_from_P(P, shape[1], shape[0])
+        frames.append(FrameFiles(stem, img, pts, cam, check_rigid(B @ _rect4(R0) @ Tr, str(cpath))))
+    return Source("kitti_object", root, frames)
+
+
+def _image_shape(path: Path) -> tuple[int, int]:
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise InputError(f"{path}: cannot decode the image (corrupt or not an image)")
+    return img.shape[:2]
+
+
+def _folder(root: Path) -> Source:
+    cpath = root / "calib.yaml"
+    data = read_mapping(cpath)
+    cam = data.get("camera")
+    if not isinstance(cam, dict):
+        raise InputError(f"{cpath}: missing 'camera' section")
+    for key in ("K", "width", "height"):
+        if key not in cam:
+            raise InputError(f"{cpath}: missing camera.{key}")
+    try:
+        K = np.asarray(cam["K"], dtype=np.float64)
+        width, height = int(cam["width"]), int(cam["height"])
+        D = None if cam.get("D") is None else np.asarray(cam["D"], dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{cpath}: camera values are not numbers ({exc})") from None
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise InputError(f"{cpath}: camera.K must be a finite 3x3 matrix, got shape {K.shape}")
+    if not np.allclose(K[2], [0, 0, 1]) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError(f"{cpath}: camera.K must have positive focal lengths and last row [0, 0, 1]")
+    if width <= 0 or height <= 0:
+        raise InputError(f"{cpath}: camera.width and camera.height must be positive")
+    if D is not None and (D.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(D))):
+        raise InputError(f"{cpath}: camera.D must hold 4, 5, 8, 12 or 14 finite OpenCV "
+                         f"coefficients, got {D.size}")
+    T_ref = None
+    if data.get("T_cam_lidar") is not None:
+        T_ref = check_rigid(data["T_cam_lidar"], str(cpath))
+    camera = Camera(K=K, width=width, height=height)
+    pairs = _pair(root, root / "images", root / "points")
+    dist = None if D is None or not np.any(D) else D
+    return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, dist) for s, i, p in pairs])
+
+
+def detect_source(source: Path, camera_index: int = 2) -> Source:
+    """Detect the layout of ``source`` and list its frames (nothing heavy is read yet)."""
+    root = Path(source)
+    if not root.exists():
+        raise InputError(f"{root}: source folder not found")
+    if not root.is_dir():
+        raise InputError(f"{root}: source must be a folder")
+    if not 0 <= camera_index <= 3:
+        raise SettingsError(f"--camera {camera_index}: must be 0, 1, 2 or 3")
+    if (root / "calib.yaml").is_file():
+        return _folder(root)
+    if (root / "training").is_dir() and not (root / "velodyne").is_dir():
+        root = root / "training"
+    if (root / "velodyne").is_dir() and (root / "calib").is_dir():
+        return _kitti_object(root, camera_index)
+    if root.name.endswith("_sync") or any(p.name.endswith("_sync") for p in root.iterdir()
+                                          if p.is_dir()):
+        return _kitti_raw(root, camera_index)
+    raise InputError(f"{root}: not a recognised layout (expected a KITTI raw drive or date folder, "
+                     "a KITTI object 'training' folder, or a folder with calib.yaml, images/ "
+                     "and points/)")
+
+
+_SLICE = re.compile(r"^(-?\d*):(-?\d*)$")
+
+
+def select_frames(names: list[str], spec: str | None) -> list[int]:
+    """Indices selected by a ``--frames`` spec: ``0:10``, ``0,3,7``, stems, or a mix.
+
+    A token equal to a frame stem selects that frame; otherwise an integer is an index into the
+    frames in stem order and ``a:b`` a Python slice of them.
+    """
+    if spec is None or str(spec).strip() == "":
+        return list(range(len(names)))
+    index = {n: i for i, n in enumerate(names)}
+    chosen: list[int] = []
+    for token in (t.strip() for t in str(spec).split(",")):
+        if not token:
+            continue
+        if token in index:
+            chosen.append(index[token])
+            continue
+        m = _SLICE.match(token)
+        if m:
+            a = int(m.group(1)) if m.group(1) else None
+            b = int(m.group(2)) if m.group(2) else None
+            chosen.extend(range(len(names))[slice(a, b)])
+        elif re.fullmatch(r"-?\d+", token):
+            i = int(token)
+            if not -len(names) <= i < len(names):
+                raise SettingsError(f"--frames {spec}: index {i} is out of range "
+                                    f"(the source has {len(names)} frames)")
+            chosen.append(i % len(names))
+        else:
+            raise SettingsError(f"--frames {spec}: {token!r} is neither a frame stem nor an index")
+    chosen = list(dict.fromkeys(chosen))
+    if not chosen:
+        raise SettingsError(f"--frames {spec}: selects no frame (the source has {len(names)})")
+    return chosen
+
+
+def read_frame(files: FrameFiles) -> Frame:
+    """Read one frame's image and points, undistorting the image when the camera has ``D``."""
+    image = read_image(files.image_path)
+    cam = files.camera
+    if image.shape[1] != cam.width or image.shape[0] != cam.height:
+        raise InputError(f"{files.image_path}: image is {image.shape[1]}x{image.shape[0]} but the "
+                         f"calibration says {cam.width}x{cam.height}")
+    if files.dist is not None:
+        image = cv2.undistort(image, cam.K, files.dist)
+    points = read_points(files.points_path)
+    return Frame(files.name, image, points, cam, files.T_ref, files.image_path, files.points_path)
+
+
+def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) -> list[Frame]:
+    """Detect the layout of ``source`` and read the selected frames.
+
+    Parameters
+    ----------
+    source : path
+        A KITTI raw drive (or date) folder, a KITTI object ``training`` folder, or a generic
+        folder with ``calib.yaml`` (INTERFACES.md section 2).
+    frames : str, optional
+        Selection spec (``0:10``, ``0,3,7``, stems); all frames by default.
+    camera : int
+        KITTI camera index (0-3 for raw, 2-3 for object); ignored by the generic layout.
+
+    Returns
+    -------
+    list of Frame
+    """
+    src = detect_source(Path(source), camera)
+    idx = select_frames([f.name for f in src.frames], frames)
+    return [read_frame(src.frames[i]) for i in idx]

@@ -1,0 +1,89 @@
+"""Writing a calibration run: result.json, pareto.csv, extrinsic.yaml and figures.
+
+Every file is written atomically (temporary file, then rename).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..search.problem import VARIABLES
+from .atomic import atomic_write_text
+from .extrinsic import write_extrinsic
+from .frame import Frame
+
+FRONT_CSV_FIXED = list(VARIABLES) + ["chamfer", "cost", "t_norm", "m_norm", "ms", "bytes"]
+
+
+def front_csv(result) -> str:
+    """``pareto.csv`` text: one row per front solution, the chosen one flagged."""
+    front = result.front
+    cols = front.columns
+    extra = [k for k in ("points", "edge_px", "intensity_px", "smooth_px", "sampling_se",
+                         "in_view") if k in cols]
+    ref = [k for k in cols if k.startswith("ref_")]
+    header = FRONT_CSV_FIXED + extra + ref + ["chosen"]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for i in range(len(front.X)):
+        x = front.X[i]
+        row = [f"{v:.6f}" for v in x[:6]] + [str(int(round(x[6])))]
+        row += [f"{front.F[i, 0]:.6f}", f"{front.F[i, 1]:.6f}",
+                f"{cols['t_norm'][i]:.6f}", f"{cols['m_norm'][i]:.6f}",
+                f"{cols['ms'][i]:.6g}", str(int(round(cols['bytes'][i])))]
+        row += [f"{cols[k][i]:.6g}" for k in extra + ref]
+        row.append("1" if i == result.chosen else "0")
+        w.writerow(row)
+    return buf.getvalue()
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, tuple):
+        return list(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
+              figures: bool = True, overlay_frame: int = 0) -> list[Path]:
+    """Write the run directory; returns the paths written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    doc = result.to_dict()
+    atomic_write_text(out / "result.json", json.dumps(doc, indent=2, default=_json_default) + "\n")
+    written.append(out / "result.json")
+    atomic_write_text(out / "pareto.csv", front_csv(result))
+    written.append(out / "pareto.csv")
+    write_extrinsic(out / "extrinsic.yaml", result.T_cam_lidar,
+                    comment=f"paretocal {doc['version']}: chosen T_cam_lidar (LiDAR -> camera), "
+                            f"rule {result.decision['rule']}, n = {result.n_points}")
+    written.append(out / "extrinsic.yaml")
+    if figures:
+        from ..report.figures import overlay_figure, pareto_figure
+
+        pareto_figure(result, out / "pareto.png")
+        written.append(out / "pareto.png")
+        if frames:
+            f = frames[min(overlay_frame, len(frames) - 1)]
+            z_min = result.settings.features.z_min
+            overlay_figure(f, result.T_init, out / "overlay_before.png",
+                           f"before: initial extrinsic (frame {f.name})", z_min)
+            overlay_figure(f, result.T_cam_lidar, out / "overlay_after.png",
+                           f"after: chosen calibration, n = {result.n_points} (frame {f.name})",
+                           z_min)
+            written += [out / "overlay_before.png", out / "overlay_after.png"]
+            if result.T_ref is not None:
+                overlay_figure(f, result.T_ref, out / "overlay_reference.png",
+                               f"dataset reference extrinsic (frame {f.name})", z_min)
+                written.append(out / "overlay_reference.png")
+    return written

@@ -1,0 +1,86 @@
+"""Both objectives for a population of candidates ``[x, y, z, yaw, pitch, roll, n]`` in one call."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import ObjectiveSettings
+from ..geometry import apply_correction
+from .chamfer import combine, group_weights
+from .cost import CostModel, measure_per_candidate
+from .kernel import get_evaluator
+from .paper import paper_chamfer
+from .scene import Scene
+
+
+class CalibrationObjective:
+    """Evaluates f1 (alignment) and f2 (cost) for whole populations.
+
+    Parameters
+    ----------
+    scene : Scene
+    T_init : ndarray, shape (4, 4)
+        Initial extrinsic; candidates are corrections ``T_init @ D(x..roll)``.
+    settings : ObjectiveSettings
+    cost_model : CostModel
+    edge_uv : list of ndarray, optional
+        Edge pixels per frame, needed only by the paper's Chamfer.
+    """
+
+    def __init__(self, scene: Scene, T_init: np.ndarray, settings: ObjectiveSettings,
+                 cost_model: CostModel, edge_uv: list[np.ndarray] | None = None):
+        self.scene = scene
+        self.T_init = np.asarray(T_init, dtype=np.float64)
+        self.settings = settings
+        self.cost_model = cost_model
+        self.edge_uv = edge_uv
+        self.sums = get_evaluator(settings.evaluator)
+        self.weights = group_weights(settings.w_edge, settings.contrast)
+        self.evaluations = 0
+
+    def transforms(self, X: np.ndarray) -> np.ndarray:
+        """Candidate extrinsics ``T_init @ D``, shape (C, 4, 4)."""
+        return apply_correction(self.T_init, np.asarray(X, dtype=np.float64)[:, :6])
+
+    def chamfer(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """First objective and its parts for candidates X, shape (C, 7).
+
+        Returns ``f1`` (C,), ``mean`` (C, G) per-group mean cost (px), ``se`` (C,) sampling
+        error and ``in_view`` (C,) fraction of the evaluated points that landed in the image.
+        """
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        n = np.rint(X[:, 6]).astype(np.int64)
+        A = self.scene.projections(self.transforms(X))
+        self.evaluations += len(X)
+        S1, S2, n_in = self.sums(self.scene, A, n)
+        counts = self.scene.group_counts(n)
+        out = combine(S1, S2, counts, self.scene.outside, self.weights, self.settings.ucb_k)
+        used = np.maximum(counts.sum(axis=(1, 2)), 1)
+        out["in_view"] = n_in.sum(axis=1) / used
+        if self.settings.chamfer == "paper":
+            out["f1"] = paper_chamfer(self.scene, self.edge_uv, A, n)
+        return out
+
+    def cost(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """Second objective: ``f2`` (C,), with ``ms`` and ``bytes`` per evaluation."""
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        n = np.rint(X[:, 6]).astype(np.int64)
+        pts = self.scene.points_used(n)
+        cm = self.cost_model
+        if self.settings.cost == "psutil":
+            A = self.scene.projections(self.transforms(X))
+
+            def one(i):
+                self.sums(self.scene, A[i:i + 1], n[i:i + 1])
+
+            ms, nbytes = measure_per_candidate(one, len(X))
+            t = ms / float(cm.time_ms(cm.points_max))
+            m = nbytes / float(cm.nbytes(cm.points_max))
+        else:
+            ms, nbytes = cm.time_ms(pts), cm.nbytes(pts)
+            t, m = cm.normalised(pts)
+        return {"f2": t + m, "t_norm": t, "m_norm": m, "ms": ms, "bytes": nbytes, "points": pts}
+
+    def evaluate(self, X: np.ndarray) -> np.ndarray:
+        """``F`` of shape (C, 2): ``[f1, f2]`` for each candidate."""
+        return np.column_stack([self.chamfer(X)["f1"], self.cost(X)["f2"]])

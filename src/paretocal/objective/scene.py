@@ -1,0 +1,135 @@
+"""The frames' features laid out as flat arrays for the evaluators.
+
+Points are stored per coordinate as contiguous float32 arrays (frame after frame, each in its
+evaluation order), distance transforms as one flat float32 buffer; per-frame offsets index both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..features.lidar import GROUP_NAMES
+from ..features.prepare import FrameFeatures
+
+N_GROUPS = len(GROUP_NAMES)
+
+
+@dataclass(eq=False)
+class Scene:
+    """Flat arrays over F frames holding M points in all.
+
+    Attributes
+    ----------
+    x, y, z : ndarray, shape (M,), float32
+        Feature point coordinates in the LiDAR frame (metres).
+    group : ndarray, shape (M,), int8
+    point_start : ndarray, shape (F + 1,), int64
+        Frame f owns points ``point_start[f]:point_start[f + 1]``.
+    dt : ndarray, shape (sum H*W,), float32
+        Truncated distance transforms, row-major, frame after frame.
+    dt_start : ndarray, shape (F,), int64
+    width, height : ndarray, shape (F,), int64
+    outside : ndarray, shape (F,), float32
+        Cost charged to a point that is behind the camera or outside the image.
+    K : ndarray, shape (F, 3, 3), float64
+    group_prefix : ndarray, shape (F, max_points + 1, G), int64
+        ``group_prefix[f, k, g]`` = points of group g among the first k of frame f.
+    z_min : float
+    truncation_px : float
+    names : list of str
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    group: np.ndarray
+    point_start: np.ndarray
+    dt: np.ndarray
+    dt_start: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    outside: np.ndarray
+    K: np.ndarray
+    group_prefix: np.ndarray
+    z_min: float
+    truncation_px: float
+    names: list[str]
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.point_start) - 1
+
+    @property
+    def points_per_frame(self) -> np.ndarray:
+        """Feature points held by each frame, shape (F,)."""
+        return np.diff(self.point_start)
+
+    def points_used(self, n) -> np.ndarray:
+        """Points evaluated over all frames for ``n`` points per frame (shape of ``n``)."""
+        n = np.asarray(n, dtype=np.int64)
+        return np.minimum(n[..., None], self.points_per_frame).sum(axis=-1)
+
+    def group_counts(self, n: np.ndarray) -> np.ndarray:
+        """Points of each group among the first ``n`` of each frame, shape (C, F, G)."""
+        n = np.asarray(n, dtype=np.int64)
+        m = np.minimum(n[:, None], self.points_per_frame[None, :])
+        return self.group_prefix[np.arange(self.n_frames)[None, :], m]
+
+    def projections(self, T: np.ndarray) -> np.ndarray:
+        """``K_f @ T_c[:3]`` for transforms (C, 4, 4): float64 (C, F, 3, 4)."""
+        return np.einsum("fij,cjk->cfik", self.K, np.asarray(T, dtype=np.float64)[:, :3, :])
+
+    def frame_dt(self, f: int) -> np.ndarray:
+        """The distance transform of frame f, shape (H, W)."""
+        h, w, s = int(self.height[f]), int(self.width[f]), int(self.dt_start[f])
+        return self.dt[s:s + h * w].reshape(h, w)
+
+    def frame_xyz(self, f: int) -> np.ndarray:
+        """Frame f's points, shape (M_f, 3) float32."""
+        a, b = self.point_start[f], self.point_start[f + 1]
+        return np.column_stack([self.x[a:b], self.y[a:b], self.z[a:b]])
+
+    @property
+    def nbytes_static(self) -> int:
+        """Bytes of the arrays every evaluation reads regardless of n (the DTs)."""
+        return int(self.dt.nbytes)
+
+
+def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = "mean") -> Scene:
+    """Lay out prepared frames for evaluation.
+
+    ``outside`` chooses the charge for a point out of view: ``"mean"`` charges the frame's mean
+    truncated DT (a point out of view costs what a point dropped at random costs, so neither
+    pushing points out nor pulling unseen points in pays on average); ``"truncation"`` charges
+    the full truncation distance.
+    """
+    counts = np.array([len(f.xyz) for f in frames], dtype=np.int64)
+    point_start = np.concatenate([[0], np.cumsum(counts)])
+    xyz = np.vstack([f.xyz for f in frames]) if counts.sum() else np.zeros((0, 3))
+    group = (np.concatenate([f.group for f in frames]) if counts.sum()
+             else np.zeros(0, np.int8)).astype(np.int8)
+    sizes = np.array([f.image.dt.size for f in frames], dtype=np.int64)
+    dt_start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    trunc = frames[0].image.truncation_px
+    out = np.array([f.image.mean_dt if outside == "mean" else trunc for f in frames],
+                   dtype=np.float32)
+    maxm = int(counts.max()) if len(counts) else 0
+    prefix = np.zeros((len(frames), maxm + 1, N_GROUPS), dtype=np.int64)
+    for i, f in enumerate(frames):
+        onehot = np.eye(N_GROUPS, dtype=np.int64)[f.group]
+        prefix[i, 1:len(f.xyz) + 1] = np.cumsum(onehot, axis=0)
+        prefix[i, len(f.xyz) + 1:] = prefix[i, len(f.xyz)]
+    return Scene(
+        x=np.ascontiguousarray(xyz[:, 0], dtype=np.float32),
+        y=np.ascontiguousarray(xyz[:, 1], dtype=np.float32),
+        z=np.ascontiguousarray(xyz[:, 2], dtype=np.float32),
+        group=group, point_start=point_start,
+        dt=np.concatenate([f.image.dt.ravel() for f in frames]).astype(np.float32),
+        dt_start=dt_start,
+        width=np.array([f.image.dt.shape[1] for f in frames], dtype=np.int64),
+        height=np.array([f.image.dt.shape[0] for f in frames], dtype=np.int64),
+        outside=out, K=np.stack([np.asarray(f.camera.K, dtype=np.float64) for f in frames]),
+        group_prefix=prefix, z_min=float(z_min), truncation_px=float(trunc),
+        names=[f.name for f in frames])

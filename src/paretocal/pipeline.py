@@ -1,0 +1,299 @@
+"""The calibration pipeline: frames -> features -> objective -> search -> decision -> result."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .config import Settings
+from .decide import choose
+from .errors import DegenerateSceneError, InputError, SettingsError
+from .features.lidar import GROUP_NAMES
+from .features.prepare import FrameFeatures, prepare_frame
+from .geometry import correction_params, pose_error
+from .io.frame import Frame
+from .io.layouts import load_frames
+from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
+from .objective.cost import CostModel
+from .search import VARIABLES, bounds, front_of, run_nsga2
+from .search.polish import polish
+
+log = logging.getLogger(__name__)
+
+MIN_POINTS_PER_FRAME = 30
+DEFAULT_N_MIN = 20
+
+
+@dataclass
+class Front:
+    """The final non-dominated set, sorted by cost.
+
+    Attributes
+    ----------
+    X : ndarray, shape (k, 7)
+        ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    F : ndarray, shape (k, 2)
+        ``[f1, f2]``.
+    T : ndarray, shape (k, 4, 4)
+        The extrinsics.
+    columns : dict of str -> ndarray (k,)
+        Per-solution figures: chamfer parts, ``ms``, ``bytes``, ``in_view`` and, when a
+        reference is known, the reference errors.
+    """
+
+    X: np.ndarray
+    F: np.ndarray
+    T: np.ndarray
+    columns: dict
+
+
+@dataclass
+class CalibrationResult:
+    """Everything a calibration run produced (see :func:`calibrate`)."""
+
+    T_cam_lidar: np.ndarray
+    T_init: np.ndarray
+    T_ref: np.ndarray | None
+    chosen: int
+    front: Front
+    decision: dict
+    cost_model: CostModel
+    settings: Settings
+    evaluations: int
+    wall_s: float
+    timings: dict
+    frames: list[str]
+    feature_counts: dict
+    n_range: tuple[int, int]
+    history: list = field(default_factory=list)
+    nsga_front: tuple | None = None
+
+    @property
+    def correction(self) -> dict[str, float]:
+        x = self.front.X[self.chosen]
+        return {k: float(v) for k, v in zip(VARIABLES[:6], x[:6])}
+
+    @property
+    def n_points(self) -> int:
+        return int(round(self.front.X[self.chosen, 6]))
+
+    @property
+    def reference_error(self) -> dict | None:
+        if self.T_ref is None:
+            return None
+        e = pose_error(self.T_cam_lidar, self.T_ref)
+        return {k: float(v) for k, v in e.items()}
+
+    @property
+    def initial_error(self) -> dict | None:
+        if self.T_ref is None:
+            return None
+        e = pose_error(self.T_init, self.T_ref)
+        return {k: float(v) for k, v in e.items()}
+
+    def objectives(self) -> dict[str, float]:
+        i, c = self.chosen, self.front.columns
+        out = {"chamfer": float(self.front.F[i, 0]), "cost": float(self.front.F[i, 1])}
+        for k in ("t_norm", "m_norm", "ms", "bytes", "edge_px", "intensity_px", "smooth_px",
+                  "sampling_se", "in_view"):
+            if k in c:
+                out[k] = float(c[k][i])
+        return out
+
+    def to_dict(self) -> dict:
+        """The ``result.json`` document (INTERFACES.md section 4)."""
+        return {
+            "T_cam_lidar": self.T_cam_lidar.tolist(),
+            "T_init": self.T_init.tolist(),
+            "correction": self.correction,
+            "n_points": self.n_points,
+            "objectives": self.objectives(),
+            "decision": self.decision,
+            "reference_error": self.reference_error,
+            "initial_error": self.initial_error,
+            "evaluations": int(self.evaluations),
+            "wall_s": round(float(self.wall_s), 3),
+            "seed": int(self.settings.search.seed),
+            "version": __version__,
+            "config": self.settings.to_dict(),
+            "frames": self.frames,
+            "n_range": list(self.n_range),
+            "front_size": int(len(self.front.X)),
+            "features": self.feature_counts,
+            "cost_model": self.cost_model.to_dict(),
+            "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
+        }
+
+
+def resolve_init(frames: list[Frame], T_init: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The initial extrinsic and the reference: ``--init`` wins; the dataset's is the fallback.
+
+    The reference is returned only when an initial guess was given independently of it, so the
+    reported error is never trivially zero.
+    """
+    T_ref = frames[0].T_ref
+    if T_ref is not None and any(f.T_ref is None or not np.allclose(f.T_ref, T_ref, atol=1e-9)
+                                 for f in frames):
+        log.warning("frames carry different reference extrinsics; the first frame's is used")
+    if T_init is None:
+        if T_ref is None:
+            raise InputError("no initial extrinsic: the source has no T_cam_lidar; pass --init")
+        return T_ref.copy(), None
+    return np.asarray(T_init, dtype=np.float64), T_ref
+
+
+def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings,
+                     progress=None) -> list[FrameFeatures]:
+    """Features of every frame, each with its own seeded stream (independent of frame count)."""
+    seq = np.random.SeedSequence(settings.search.seed)
+    out = []
+    for k, (frame, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
+        out.append(prepare_frame(frame, T_init, settings.features, settings.objective,
+                                 np.random.default_rng(child)))
+        if progress is not None:
+            progress(k + 1, len(frames))
+    return out
+
+
+def _check_scene(feats: list[FrameFeatures]) -> None:
+    no_edges = [f.name for f in feats if len(f.image.edge_uv) == 0]
+    if no_edges:
+        raise DegenerateSceneError(f"no image edges in frame(s) {', '.join(no_edges[:5])}: the "
+                                   "images are blank or the Canny thresholds are too high")
+    few = [f"{f.name} ({len(f.xyz)})" for f in feats if len(f.xyz) < MIN_POINTS_PER_FRAME]
+    if len(few) == len(feats):
+        raise DegenerateSceneError(
+            f"too few LiDAR feature points in view at the initial extrinsic (fewer than "
+            f"{MIN_POINTS_PER_FRAME} per frame: {', '.join(few[:5])}); check --init and the camera")
+
+
+def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]:
+    """The search's range of points per frame, validated against what the frames hold."""
+    most = int(points_per_frame.max())
+    s = settings.search
+    n_max = most if s.n_max is None else int(s.n_max)
+    n_min = min(DEFAULT_N_MIN, n_max) if s.n_min is None else int(s.n_min)
+    if n_max > most:
+        raise SettingsError(f"--n-max {n_max}: the frames hold at most {most} feature points "
+                            "per frame")
+    if n_min > n_max:
+        raise SettingsError(f"--n-min {n_min} is larger than the largest n ({n_max})")
+    return n_min, n_max
+
+
+def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None,
+              settings: Settings | None = None, progress=None) -> CalibrationResult:
+    """Calibrate the camera-LiDAR extrinsic of a set of frames.
+
+    Parameters
+    ----------
+    source : path or list of Frame
+        A dataset folder (any layout of INTERFACES.md section 2) or frames already loaded.
+    T_init : ndarray, shape (4, 4), optional
+        Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
+    settings : Settings, optional
+    progress : callable, optional
+        ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``.
+
+    Returns
+    -------
+    CalibrationResult
+    """
+    settings = (settings or Settings()).validate()
+    t_start = time.perf_counter()
+    timings = {}
+    if isinstance(source, (str, Path)):
+        frames = load_frames(source, settings.frames, settings.camera)
+    else:
+        frames = list(source)
+    if not frames:
+        raise InputError("no frames to calibrate")
+    timings["load"] = time.perf_counter() - t_start
+    T_init, T_ref = resolve_init(frames, T_init)
+
+    def report(stage):
+        return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
+
+    t0 = time.perf_counter()
+    feats = prepare_features(frames, T_init, settings, report("features"))
+    _check_scene(feats)
+    scene = build_scene(feats, settings.features.z_min, settings.objective.outside)
+    timings["features"] = time.perf_counter() - t0
+    n_min, n_max = n_range(settings, scene.points_per_frame)
+
+    t0 = time.perf_counter()
+    cost_model = measure_cost_model(scene, get_evaluator(settings.objective.evaluator), T_init,
+                                    n_min, n_max)
+    timings["cost_model"] = time.perf_counter() - t0
+    d = settings.decision
+    if d.rule == "budget" and d.budget_ms < float(cost_model.time_ms(cost_model.points_min)):
+        raise SettingsError(f"--budget-ms {d.budget_ms:g}: below the cheapest evaluation "
+                            f"({float(cost_model.time_ms(cost_model.points_min)):.4g} ms at "
+                            f"n = {n_min}); raise the budget or lower --n-min")
+    objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
+                                     [f.image.edge_uv for f in feats])
+    res = run_nsga2(objective, settings.search, n_min, n_max, report("search"))
+    timings["search"] = res.wall_s
+    timings["search_objective"] = res.objective_s
+
+    X, F = res.X, res.F
+    evaluations = res.evaluations
+    if d.refine:
+        t0 = time.perf_counter()
+        X, F, ev = polish_front(objective, X, F, settings, n_min, n_max)
+        evaluations += ev
+        timings["polish"] = time.perf_counter() - t0
+
+    T = objective.transforms(X)
+    parts = objective.chamfer(X)
+    costs = objective.cost(X)
+    columns = {"t_norm": costs["t_norm"], "m_norm": costs["m_norm"], "ms": costs["ms"],
+               "bytes": costs["bytes"], "points": costs["points"],
+               "sampling_se": parts["se"], "in_view": parts["in_view"]}
+    for g, name in enumerate(GROUP_NAMES):
+        short = {"depth_edge": "edge_px", "intensity_edge": "intensity_px", "smooth": "smooth_px"}
+        columns[short[name]] = parts["mean"][:, g]
+    if T_ref is not None:
+        for k, v in pose_error(T, T_ref).items():
+            columns[f"ref_{k}"] = v
+    i, decision = choose(F, costs["ms"], d.rule, d.budget_ms)
+    decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
+                     "polished": bool(d.refine)})
+    wall = time.perf_counter() - t_start
+    timings["total"] = wall
+    return CalibrationResult(
+        T_cam_lidar=T[i], T_init=T_init, T_ref=T_ref, chosen=i,
+        front=Front(X=X, F=F, T=T, columns=columns), decision=decision,
+        cost_model=cost_model, settings=settings, evaluations=evaluations, wall_s=wall,
+        timings=timings, frames=[f.name for f in frames],
+        feature_counts=_feature_counts(feats), n_range=(n_min, n_max), history=res.history,
+        nsga_front=(res.X, res.F))
+
+
+def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
+                 settings: Settings, n_min: int, n_max: int, grid: int = 12):
+    """Polish every front solution at its own n, plus the best pose at a grid of n values.
+
+    The grid fills parts of the n range the search's front did not reach, so the final front
+    shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
+    """
+    best = X[np.argmin(F[:, 0])]
+    ns = np.unique(np.rint(np.geomspace(max(n_min, 1), n_max, grid)))
+    seeds = np.vstack([X, np.column_stack([np.tile(best[:6], (len(ns), 1)), ns])])
+    xl, xu = bounds(settings.search, n_min, n_max)
+    Xp, f1, evals = polish(lambda Z: objective.chamfer(Z)["f1"], seeds, lower=xl, upper=xu)
+    Fp = np.column_stack([f1, objective.cost(Xp)["f2"]])
+    Xf, Ff = front_of(Xp, Fp)
+    return Xf, Ff, evals
+
+
+def _feature_counts(feats: list[FrameFeatures]) -> dict:
+    per = [f.counts() for f in feats]
+    total = {g: int(sum(p[g] for p in per)) for g in GROUP_NAMES}
+    return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
+            "total": total, "rings": sorted({f.n_rings for f in feats})}

@@ -1,0 +1,96 @@
+"""Figures of a calibration run (matplotlib, headless)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..camera import project  # noqa: E402
+from ..io.atomic import atomic_path  # noqa: E402
+from ..io.frame import Frame  # noqa: E402
+
+KITTI_CREDIT = "data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0"
+
+
+def _save(fig, path: Path, dpi: int = 120) -> None:
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
+    plt.close(fig)
+
+
+def pareto_figure(result, path: Path) -> None:
+    """Pareto front (Chamfer vs normalised cost) with the chosen solution, and, when the
+    reference is known, the reference error of each solution against its cost."""
+    front = result.front
+    F, cols = front.F, front.columns
+    has_ref = "ref_rotation_deg" in cols
+    fig, axes = plt.subplots(1, 2 if has_ref else 1, figsize=(12 if has_ref else 6.5, 4.6),
+                             squeeze=False)
+    ax = axes[0, 0]
+    if result.nsga_front is not None:
+        _, Fn = result.nsga_front
+        ax.scatter(Fn[:, 0], Fn[:, 1], s=14, marker="x", color="0.6", lw=0.8,
+                   label="NSGA-II front (before polish)")
+    if has_ref:
+        sc = ax.scatter(F[:, 0], F[:, 1], c=cols["ref_rotation_deg"], cmap="viridis", s=26,
+                        edgecolor="k", lw=0.3, label="final front", zorder=3)
+        fig.colorbar(sc, ax=ax, label="rotation error vs reference (deg)")
+    else:
+        ax.scatter(F[:, 0], F[:, 1], s=26, color="tab:blue", edgecolor="k", lw=0.3,
+                   label="final front", zorder=3)
+    i = result.chosen
+    ax.scatter([F[i, 0]], [F[i, 1]], s=220, marker="*", color="tab:red", edgecolor="k",
+               zorder=4, label=f"chosen ({result.decision['rule']}, n = {result.n_points})")
+    ax.set_xlabel("f1: Chamfer objective (px, lower is better)")
+    ax.set_ylabel("f2: normalised cost (t_norm + m_norm)")
+    ax.set_title("Pareto front")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    if has_ref:
+        ax2 = axes[0, 1]
+        ms = cols["ms"]
+        ax2.plot(ms, cols["ref_rotation_deg"], "o-", color="tab:blue", ms=4,
+                 label="rotation error (deg)")
+        ax2.set_xlabel("modelled evaluation time (ms)")
+        ax2.set_ylabel("rotation error (deg)", color="tab:blue")
+        ax2.set_xscale("log")
+        ax3 = ax2.twinx()
+        ax3.plot(ms, cols["ref_translation_cm"], "s--", color="tab:orange", ms=4,
+                 label="translation error (cm)")
+        ax3.set_ylabel("translation error (cm)", color="tab:orange")
+        ax2.axvline(ms[i], color="tab:red", lw=1, ls=":", label="chosen")
+        ax2.set_title("Error against the dataset's reference, per front solution")
+        ax2.grid(alpha=0.3)
+        h1, l1 = ax2.get_legend_handles_labels()
+        h2, l2 = ax3.get_legend_handles_labels()
+        ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper right")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
+                   z_min: float = 0.1, max_depth: float = 60.0) -> None:
+    """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
+    uv, z, vis = project(frame.points, frame.camera, T, z_min)
+    rgb = frame.image[:, :, ::-1]
+    h, w = rgb.shape[:2]
+    fig = plt.figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
+    ax = fig.add_axes([0, 0, 1, h / (h + 45)])
+    ax.imshow(rgb)
+    order = np.argsort(-z[vis])            # far first, near on top
+    sc = ax.scatter(uv[vis][order, 0], uv[vis][order, 1], c=np.clip(z[vis][order], 0, max_depth),
+                    cmap="turbo_r", s=1.2, lw=0, vmin=0, vmax=max_depth)
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.axis("off")
+    fig.text(0.01, 1 - 0.3 * 45 / (h + 45), title, fontsize=11, va="center")
+    fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{int(vis.sum())} points in view, colour = depth "
+             f"0-{max_depth:g} m   {KITTI_CREDIT}", fontsize=7, va="center", ha="right",
+             color="0.3")
+    del sc
+    _save(fig, path, dpi=100)
