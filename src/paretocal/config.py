@@ -25,10 +25,13 @@ class FeatureSettings:
     blur_sigma: float = 1.0          #: Gaussian sigma (px) before Canny
     canny_low: float = 50.0          #: Canny hysteresis thresholds
     canny_high: float = 150.0
+    min_edge_px: int = 0             #: drop edge fragments smaller than this (px)
     depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
     cross_ring: bool = True          #: also detect edges against the rings above and below
     cross_jump_m: float = 0.3        #: across rings: jump > max(cross_jump_m, cross_jump_rel * r)
     cross_jump_rel: float = 0.25
+    along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
+    cross_fraction: float = 0.5      #: the same across rings
     intensity_jump: float = 0.3      #: reflectance jump for an intensity edge
     min_range_m: float = 1.5
     max_range_m: float = 70.0
@@ -37,6 +40,7 @@ class FeatureSettings:
     view_margin_px: float = 60.0     #: keep feature points projecting this far outside the image
     z_min: float = 0.1               #: minimum depth (m) of a projectable point
     grid: tuple[int, int] = (8, 4)   #: image cells (columns, rows) stratifying the point order
+    edge_weight: str = "none"        #: "none" or "sqrt_jump" (weight depth edges by strength)
 
 
 @dataclass(frozen=True)
@@ -48,7 +52,7 @@ class ObjectiveSettings:
     outside: str = "mean"            #: charge for points out of view: "mean" DT or "truncation"
     w_edge: float = 1.0              #: w1, weight of the depth-edge term; w2 = 1 - w1 (intensity)
     contrast: float = 1.0            #: weight of the smooth-point term subtracted (0 disables)
-    ucb_k: float = 4.6
+    ucb_k: float | None = None       #: multiplier of the sampling error; None: sqrt(2 ln evals)
     cost: str = "model"              #: "model" (deterministic) or "psutil" (paper, measured)
     evaluator: str = "auto"          #: "auto", "numba" or "numpy"
 
@@ -77,8 +81,8 @@ class DecisionSettings:
 
     rule: str = "knee"               #: "knee", "budget" or "min-chamfer"
     budget_ms: float | None = None   #: with rule "budget": modelled evaluation time limit (ms)
-    refine: bool = True              #: polish the chosen pose at its n (kept only if better)
-    refine_evals: int = 1500
+    refine: bool = True              #: polish the front locally at each solution's n
+    refine_iters: int = 12           #: Newton iterations of the polish
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,16 @@ class Settings:
             else:
                 raise SettingsError(f"unknown settings section {name!r}")
         return out
+
+    @property
+    def ucb_k(self) -> float:
+        """The sampling-error multiplier in effect: the setting, or ``sqrt(2 ln M)`` for the
+        ``M = pop * gens`` evaluations of the search (see :mod:`paretocal.objective.chamfer`)."""
+        if self.objective.ucb_k is not None:
+            return float(self.objective.ucb_k)
+        import math
+
+        return math.sqrt(2.0 * math.log(max(self.search.pop * self.search.gens, 2)))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -137,7 +151,7 @@ class Settings:
             raise SettingsError(f"--evaluator {o.evaluator!r}: choose 'auto', 'numba' or 'numpy'")
         if not o.truncation_px > 0:
             raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
-        if o.ucb_k < 0 or o.contrast < 0:
+        if (o.ucb_k is not None and o.ucb_k < 0) or o.contrast < 0:
             raise SettingsError("ucb_k and contrast must not be negative")
         if d.rule not in ("knee", "budget", "min-chamfer"):
             raise SettingsError(f"--rule {d.rule!r}: choose 'knee', 'budget' or 'min-chamfer'")

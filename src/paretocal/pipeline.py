@@ -21,12 +21,13 @@ from .io.layouts import load_frames
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search import VARIABLES, bounds, front_of, run_nsga2
-from .search.polish import polish
+from .search.polish import newton_polish, polish
 
 log = logging.getLogger(__name__)
 
 MIN_POINTS_PER_FRAME = 30
 DEFAULT_N_MIN = 20
+FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps after Newton
 
 
 @dataclass
@@ -127,6 +128,7 @@ class CalibrationResult:
             "features": self.feature_counts,
             "cost_model": self.cost_model.to_dict(),
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
+            "ucb_k": round(float(self.settings.ucb_k), 4),
         }
 
 
@@ -236,7 +238,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                             f"({float(cost_model.time_ms(cost_model.points_min)):.4g} ms at "
                             f"n = {n_min}); raise the budget or lower --n-min")
     objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
-                                     [f.image.edge_uv for f in feats])
+                                     [f.image.edge_uv for f in feats], ucb_k=settings.ucb_k)
     res = run_nsga2(objective, settings.search, n_min, n_max, report("search"))
     timings["search"] = res.wall_s
     timings["search_objective"] = res.objective_s
@@ -279,6 +281,9 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
                  settings: Settings, n_min: int, n_max: int, grid: int = 12):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
+    Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
+    the diagonal valleys of the objective; a short compass search then settles each solution.
+
     The grid fills parts of the n range the search's front did not reach, so the final front
     shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
     """
@@ -286,7 +291,10 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     ns = np.unique(np.rint(np.geomspace(max(n_min, 1), n_max, grid)))
     seeds = np.vstack([X, np.column_stack([np.tile(best[:6], (len(ns), 1)), ns])])
     xl, xu = bounds(settings.search, n_min, n_max)
-    Xp, f1, evals = polish(lambda Z: objective.chamfer(Z)["f1"], seeds, lower=xl, upper=xu)
+    fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
+    Xp, _, ev1 = newton_polish(fun, seeds, iters=settings.decision.refine_iters, lower=xl, upper=xu)
+    Xp, f1, ev2 = polish(fun, Xp, step=FINISH_STEP, lower=xl, upper=xu)
+    evals = ev1 + ev2
     Fp = np.column_stack([f1, objective.cost(Xp)["f2"]])
     Xf, Ff = front_of(Xp, Fp)
     return Xf, Ff, evals

@@ -38,7 +38,7 @@ class ImageFeatures:
 
 
 def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
-             canny_high: float = 150.0) -> np.ndarray:
+             canny_high: float = 150.0, min_edge_px: int = 0) -> np.ndarray:
     """Canny edges of a Gaussian-blurred grey image.
 
     Parameters
@@ -48,6 +48,8 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
         Gaussian sigma in pixels before Canny (0 disables the blur).
     canny_low, canny_high : float
         Hysteresis thresholds on the L2 gradient magnitude.
+    min_edge_px : int
+        Drop connected edge fragments of fewer pixels (foliage, noise); 0 keeps all.
 
     Returns
     -------
@@ -56,7 +58,13 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
     gray = image_bgr if image_bgr.ndim == 2 else cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
     if blur_sigma > 0:
         gray = cv2.GaussianBlur(gray, (0, 0), blur_sigma)
-    return cv2.Canny(gray, canny_low, canny_high, L2gradient=True)
+    edges = cv2.Canny(gray, canny_low, canny_high, L2gradient=True)
+    if min_edge_px > 1:
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(edges, connectivity=8)
+        small = stats[:, cv2.CC_STAT_AREA] < min_edge_px
+        small[0] = False
+        edges[small[labels]] = 0
+    return edges
 
 
 def distance_transform(edges: np.ndarray, truncation_px: float) -> np.ndarray:
@@ -68,9 +76,10 @@ def distance_transform(edges: np.ndarray, truncation_px: float) -> np.ndarray:
 
 
 def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
-                   canny_high: float = 150.0, truncation_px: float = 10.0) -> ImageFeatures:
+                   canny_high: float = 150.0, truncation_px: float = 10.0,
+                   min_edge_px: int = 0) -> ImageFeatures:
     """Edge map, truncated distance transform and edge pixel list of one image."""
-    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high)
+    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px)
     v, u = np.nonzero(edges)
     edge_uv = np.column_stack([u, v]).astype(np.float64)
     if len(edge_uv) == 0:

@@ -5,7 +5,8 @@ Edges are found along each laser ring (neighbouring returns of one laser) and ac
 is an edge (Levinson & Thrun, RSS 2013): the far side lies on the background. An edge point is
 placed at the angular midpoint between the near return and its far neighbour, at the near range:
 the true occluding contour lies between the two rays, and placing it on the near ray would bias
-the calibration by half a beam spacing.
+the calibration by half a beam spacing. The fraction of the way towards the far ray is a setting
+for each direction (along and across rings), 0.5 by default.
 """
 
 from __future__ import annotations
@@ -42,11 +43,11 @@ class LidarFeatures:
     n_rings: int
 
 
-def _midpoint_dir(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Points at range ``r`` along the bisector of the rays through ``p`` and ``q`` (rows)."""
+def _between_rays(p: np.ndarray, q: np.ndarray, r: np.ndarray, t: float) -> np.ndarray:
+    """Points at range ``r`` on the ray a fraction ``t`` of the way from ray ``p`` to ray ``q``."""
     a = p / np.linalg.norm(p, axis=1, keepdims=True)
     b = q / np.linalg.norm(q, axis=1, keepdims=True)
-    m = a + b
+    m = (1.0 - t) * a + t * b
     return m / np.linalg.norm(m, axis=1, keepdims=True) * r[:, None]
 
 
@@ -55,6 +56,7 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                    intensity_jump: float = 0.3, min_range_m: float = 1.5,
                    max_range_m: float = 70.0, max_gap_deg: float = 1.0,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
+                   along_fraction: float = 0.5, cross_fraction: float = 0.5,
                    rng: np.random.Generator | int | None = 0) -> LidarFeatures:
     """Extract feature points from one sweep.
 
@@ -78,6 +80,9 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     smooth_ratio : float
         Smooth-surface points kept, as a multiple of the depth edges found (0 keeps none).
     ring_method : {"auto", "scan", "elevation"}
+    along_fraction, cross_fraction : float
+        Where an edge point is placed between the near ray and its far neighbour (0 = on the
+        near ray, 0.5 = midway), along a ring and across rings.
     rng : numpy Generator or seed
         Drives the subsampling of smooth points.
 
@@ -122,7 +127,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     is_edge = jump > depth_jump_m
     far = np.where(jump_n >= jump_p, nxt, prv)
     edge_pos = np.zeros_like(xyz)
-    edge_pos[is_edge] = _midpoint_dir(xyz[is_edge], xyz[far[is_edge]], r[is_edge])
+    edge_pos[is_edge] = _between_rays(xyz[is_edge], xyz[far[is_edge]], r[is_edge],
+                                       along_fraction)
     strength = np.where(is_edge, jump, 0.0)
 
     if cross_ring:
@@ -140,7 +146,7 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                 cj = r[cand] - r[near]
                 hit = (dpsi < gap) & (cj > thr) & ~is_edge[near]
                 idx = near[hit]
-                edge_pos[idx] = _midpoint_dir(xyz[idx], xyz[cand[hit]], r[idx])
+                edge_pos[idx] = _between_rays(xyz[idx], xyz[cand[hit]], r[idx], cross_fraction)
                 strength[idx] = cj[hit]
                 is_edge[idx] = True
 

@@ -32,6 +32,8 @@ class FrameFeatures:
     xyz : ndarray, shape (M, 3), float64
         Feature points in the LiDAR frame, in evaluation order (first ``n`` used).
     group : ndarray, shape (M,), int8
+    weight : ndarray, shape (M,), float64
+        Per-point weight in the objective.
     n_rings : int
     """
 
@@ -40,6 +42,7 @@ class FrameFeatures:
     image: ImageFeatures
     xyz: np.ndarray
     group: np.ndarray
+    weight: np.ndarray
     n_rings: int
 
     def counts(self) -> dict[str, int]:
@@ -77,24 +80,41 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     would reward poses that pull unseen structure into the image.
     """
     img = image_features(frame.image, features.blur_sigma, features.canny_low,
-                         features.canny_high, objective.truncation_px)
+                         features.canny_high, objective.truncation_px, features.min_edge_px)
     lf: LidarFeatures = lidar_features(
         frame.points, depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
         cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
         intensity_jump=features.intensity_jump, min_range_m=features.min_range_m,
         max_range_m=features.max_range_m,
         smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,
-        ring_method=features.ring_method, rng=rng)
+        ring_method=features.ring_method, along_fraction=features.along_fraction,
+        cross_fraction=features.cross_fraction, rng=rng)
     keep = _wanted_groups(lf.group, objective)
     uv, z, _ = project(lf.xyz, frame.camera, T_init, features.z_min)
     keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
                                             features.view_margin_px)
     xyz, group, uv = lf.xyz[keep], lf.group[keep], uv[keep]
+    weight = point_weights(lf.strength[keep], group, features.edge_weight)
     gx, gy = features.grid
     cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
     cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
     order = stratified_order(group, cv * gx + cu, rng)
-    return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], lf.n_rings)
+    return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], weight[order],
+                         lf.n_rings)
+
+
+def point_weights(strength: np.ndarray, group: np.ndarray, rule: str) -> np.ndarray:
+    """Objective weight per point: 1, or for depth edges ``sqrt(jump / 1 m)`` (Levinson and
+    Thrun's edge strength), capped at 3 so that a few far jumps cannot dominate."""
+    from .lidar import DEPTH_EDGE
+
+    w = np.ones(len(strength))
+    if rule == "sqrt_jump":
+        d = group == DEPTH_EDGE
+        w[d] = np.clip(np.sqrt(np.maximum(strength[d], 0.0)), 0.1, 3.0)
+    elif rule != "none":
+        raise ValueError(f"unknown edge weighting {rule!r}")
+    return w
 
 
 def _wanted_groups(group: np.ndarray, objective: ObjectiveSettings) -> np.ndarray:

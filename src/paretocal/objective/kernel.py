@@ -3,7 +3,7 @@
 For every candidate c and frame f, the first ``n[c]`` points of frame f are projected with
 ``A[c, f] = K_f @ T_c[:3]``; a point in front of the camera and inside the image costs the
 bilinear DT value at its pixel, any other point costs ``outside[f]``. The evaluators return the
-per-group sums of the cost and of its square, shape (C, F, G), from which the objective takes
+per-group weighted sums of the cost and of its square, shape (C, F, G), from which the objective takes
 means and sampling errors.
 
 Two implementations give the same sums: a fused numba kernel (parallel over candidates, one pass
@@ -28,7 +28,7 @@ except Exception:  # pragma: no cover - exercised only where numba is broken
 if HAVE_NUMBA:
 
     @njit(parallel=True, cache=True, fastmath=False)
-    def _sums_numba(A, n, x, y, z, group, point_start, dt, dt_start, width, height, outside,
+    def _sums_numba(A, n, x, y, z, weight, group, point_start, dt, dt_start, width, height, outside,
                     z_min, S1, S2, NIN):  # pragma: no cover - compiled
         C = A.shape[0]
         F = point_start.shape[0] - 1
@@ -71,8 +71,9 @@ if HAVE_NUMBA:
                             d = top + fy * (bot - top)
                             inside += 1
                     g = group[i]
-                    acc1[g] += d
-                    acc2[g] += d * d
+                    wd = weight[i] * d
+                    acc1[g] += wd
+                    acc2[g] += wd * d
                 for g in range(G):
                     S1[c, f, g] = acc1[g]
                     S2[c, f, g] = acc2[g]
@@ -96,7 +97,7 @@ def sums_numba(scene: Scene, A: np.ndarray, n: np.ndarray):
     S2 = np.zeros((C, F, N_GROUPS))
     NIN = np.zeros((C, F), dtype=np.int64)
     _sums_numba(np.ascontiguousarray(A, dtype=np.float64),
-                np.ascontiguousarray(n, dtype=np.int64), scene.x, scene.y, scene.z,
+                np.ascontiguousarray(n, dtype=np.int64), scene.x, scene.y, scene.z, scene.weight,
                 scene.group, scene.point_start, scene.dt, scene.dt_start, scene.width,
                 scene.height, scene.outside, np.float64(scene.z_min), S1, S2, NIN)
     return S1, S2, NIN
@@ -118,6 +119,7 @@ def sums_numpy(scene: Scene, A: np.ndarray, n: np.ndarray, chunk_points: int = 4
         P = np.column_stack([scene.x[a:b], scene.y[a:b], scene.z[a:b],
                              np.ones(m_all, np.float32)]).astype(np.float64)
         grp = scene.group[a:b]
+        wt = scene.weight[a:b].astype(np.float64)
         dtf = scene.frame_dt(f)
         w, h = int(scene.width[f]), int(scene.height[f])
         step = max(1, chunk_points // m_all)
@@ -140,8 +142,8 @@ def sums_numpy(scene: Scene, A: np.ndarray, n: np.ndarray, chunk_points: int = 4
             d = np.where(used, d, 0.0)
             for g in range(N_GROUPS):
                 sel = grp == g
-                S1[c0:c0 + step, f, g] = d[:, sel].sum(axis=1)
-                S2[c0:c0 + step, f, g] = (d[:, sel] ** 2).sum(axis=1)
+                S1[c0:c0 + step, f, g] = (d[:, sel] * wt[sel]).sum(axis=1)
+                S2[c0:c0 + step, f, g] = (d[:, sel] ** 2 * wt[sel]).sum(axis=1)
             NIN[c0:c0 + step, f] = (ok & used).sum(axis=1)
     return S1, S2, NIN
 
@@ -177,8 +179,9 @@ def sums_kdtree(scene: Scene, edge_uv: list[np.ndarray], A: np.ndarray, n: np.nd
                 dist, _ = tree.query(uv[ok])
                 d[ok] = np.minimum(dist, scene.truncation_px)
             g = scene.group[a:a + m]
-            S1[c, f] = np.bincount(g, weights=d, minlength=N_GROUPS)
-            S2[c, f] = np.bincount(g, weights=d * d, minlength=N_GROUPS)
+            wt = scene.weight[a:a + m].astype(np.float64)
+            S1[c, f] = np.bincount(g, weights=wt * d, minlength=N_GROUPS)
+            S2[c, f] = np.bincount(g, weights=wt * d * d, minlength=N_GROUPS)
             NIN[c, f] = ok.sum()
     return S1, S2, NIN
 

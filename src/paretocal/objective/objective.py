@@ -25,10 +25,13 @@ class CalibrationObjective:
     cost_model : CostModel
     edge_uv : list of ndarray, optional
         Edge pixels per frame, needed only by the paper's Chamfer.
+    ucb_k : float, optional
+        Sampling-error multiplier; ``settings.ucb_k`` when omitted (0 if that is None).
     """
 
     def __init__(self, scene: Scene, T_init: np.ndarray, settings: ObjectiveSettings,
-                 cost_model: CostModel, edge_uv: list[np.ndarray] | None = None):
+                 cost_model: CostModel, edge_uv: list[np.ndarray] | None = None,
+                 ucb_k: float | None = None):
         self.scene = scene
         self.T_init = np.asarray(T_init, dtype=np.float64)
         self.settings = settings
@@ -37,6 +40,7 @@ class CalibrationObjective:
         self.sums = get_evaluator(settings.evaluator)
         self.weights = group_weights(settings.w_edge, settings.contrast)
         self.evaluations = 0
+        self.ucb_k = float(ucb_k if ucb_k is not None else (settings.ucb_k or 0.0))
 
     def transforms(self, X: np.ndarray) -> np.ndarray:
         """Candidate extrinsics ``T_init @ D``, shape (C, 4, 4)."""
@@ -53,10 +57,9 @@ class CalibrationObjective:
         A = self.scene.projections(self.transforms(X))
         self.evaluations += len(X)
         S1, S2, n_in = self.sums(self.scene, A, n)
-        counts = self.scene.group_counts(n)
-        out = combine(S1, S2, counts, self.scene.outside, self.weights, self.settings.ucb_k)
-        used = np.maximum(counts.sum(axis=(1, 2)), 1)
-        out["in_view"] = n_in.sum(axis=1) / used
+        W1, W2 = self.scene.group_weights(n)
+        out = combine(S1, S2, W1, W2, self.scene.outside, self.weights, self.ucb_k)
+        out["in_view"] = n_in.sum(axis=1) / np.maximum(self.scene.points_used(n), 1)
         if self.settings.chamfer == "paper":
             out["f1"] = paper_chamfer(self.scene, self.edge_uv, A, n)
         return out

@@ -24,6 +24,8 @@ class Scene:
     ----------
     x, y, z : ndarray, shape (M,), float32
         Feature point coordinates in the LiDAR frame (metres).
+    weight : ndarray, shape (M,), float32
+        Per-point weight (1 unless edges are weighted by strength).
     group : ndarray, shape (M,), int8
     point_start : ndarray, shape (F + 1,), int64
         Frame f owns points ``point_start[f]:point_start[f + 1]``.
@@ -34,8 +36,9 @@ class Scene:
     outside : ndarray, shape (F,), float32
         Cost charged to a point that is behind the camera or outside the image.
     K : ndarray, shape (F, 3, 3), float64
-    group_prefix : ndarray, shape (F, max_points + 1, G), int64
-        ``group_prefix[f, k, g]`` = points of group g among the first k of frame f.
+    group_prefix : ndarray, shape (F, max_points + 1, G, 2), float64
+        ``group_prefix[f, k, g]`` = sum of the weights and of the squared weights of group g
+        among the first k points of frame f (both equal the count when weights are 1).
     z_min : float
     truncation_px : float
     names : list of str
@@ -44,6 +47,7 @@ class Scene:
     x: np.ndarray
     y: np.ndarray
     z: np.ndarray
+    weight: np.ndarray
     group: np.ndarray
     point_start: np.ndarray
     dt: np.ndarray
@@ -71,11 +75,13 @@ class Scene:
         n = np.asarray(n, dtype=np.int64)
         return np.minimum(n[..., None], self.points_per_frame).sum(axis=-1)
 
-    def group_counts(self, n: np.ndarray) -> np.ndarray:
-        """Points of each group among the first ``n`` of each frame, shape (C, F, G)."""
+    def group_weights(self, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Sums of weights and of squared weights of each group among the first ``n`` points
+        of each frame, each of shape (C, F, G)."""
         n = np.asarray(n, dtype=np.int64)
         m = np.minimum(n[:, None], self.points_per_frame[None, :])
-        return self.group_prefix[np.arange(self.n_frames)[None, :], m]
+        pref = self.group_prefix[np.arange(self.n_frames)[None, :], m]
+        return pref[..., 0], pref[..., 1]
 
     def projections(self, T: np.ndarray) -> np.ndarray:
         """``K_f @ T_c[:3]`` for transforms (C, 4, 4): float64 (C, F, 3, 4)."""
@@ -115,17 +121,21 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
     trunc = frames[0].image.truncation_px
     out = np.array([f.image.mean_dt if outside == "mean" else trunc for f in frames],
                    dtype=np.float32)
+    weight = (np.concatenate([f.weight for f in frames]) if counts.sum()
+              else np.zeros(0)).astype(np.float32)
     maxm = int(counts.max()) if len(counts) else 0
-    prefix = np.zeros((len(frames), maxm + 1, N_GROUPS), dtype=np.int64)
+    prefix = np.zeros((len(frames), maxm + 1, N_GROUPS, 2))
     for i, f in enumerate(frames):
-        onehot = np.eye(N_GROUPS, dtype=np.int64)[f.group]
-        prefix[i, 1:len(f.xyz) + 1] = np.cumsum(onehot, axis=0)
+        w = f.weight.astype(np.float32).astype(np.float64)
+        onehot = np.eye(N_GROUPS)[f.group]
+        prefix[i, 1:len(f.xyz) + 1, :, 0] = np.cumsum(onehot * w[:, None], axis=0)
+        prefix[i, 1:len(f.xyz) + 1, :, 1] = np.cumsum(onehot * (w * w)[:, None], axis=0)
         prefix[i, len(f.xyz) + 1:] = prefix[i, len(f.xyz)]
     return Scene(
         x=np.ascontiguousarray(xyz[:, 0], dtype=np.float32),
         y=np.ascontiguousarray(xyz[:, 1], dtype=np.float32),
         z=np.ascontiguousarray(xyz[:, 2], dtype=np.float32),
-        group=group, point_start=point_start,
+        weight=weight, group=group, point_start=point_start,
         dt=np.concatenate([f.image.dt.ravel() for f in frames]).astype(np.float32),
         dt_start=dt_start,
         width=np.array([f.image.dt.shape[1] for f in frames], dtype=np.int64),

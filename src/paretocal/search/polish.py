@@ -65,3 +65,108 @@ def polish(chamfer, X: np.ndarray, step: np.ndarray = DEFAULT_STEP,
         scale[lose] *= 0.5
         active[lose] = (scale[lose] >= min_step).any(axis=1)
     return X, f, evals
+
+
+DEFAULT_FD_STEP = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1])   # m, m, m, deg, deg, deg
+
+
+def _fd_stencil(h: np.ndarray) -> np.ndarray:
+    """Offsets (28, 6) for a finite-difference gradient and Hessian: centre, +-h_i, h_i + h_j."""
+    e = np.eye(6) * h
+    pairs = [e[i] + e[j] for i in range(6) for j in range(i + 1, 6)]
+    return np.vstack([np.zeros(6), e, -e, pairs])
+
+
+def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP):
+    """Finite-difference gradient and Hessian of f1 over the pose, for many solutions at once.
+
+    Parameters
+    ----------
+    chamfer : callable
+        ``chamfer(X) -> f1`` for X of shape (C, 7).
+    X : ndarray, shape (k, 7)
+    h : ndarray, shape (6,)
+        Difference steps (m, deg); large enough to average over pixel-scale roughness.
+
+    Returns
+    -------
+    f : ndarray, shape (k,)
+    g : ndarray, shape (k, 6)
+        Gradient per metre / degree.
+    H : ndarray, shape (k, 6, 6)
+        Hessian per metre / degree squared.
+    """
+    k = len(X)
+    S = _fd_stencil(h)
+    cand = np.repeat(X[:, None, :], len(S), axis=1)
+    cand[:, :, :6] += S[None]
+    v = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(k, len(S))
+    f0, fp, fm, fpp = v[:, 0], v[:, 1:7], v[:, 7:13], v[:, 13:]
+    g = (fp - fm) / (2 * h)
+    H = np.zeros((k, 6, 6))
+    idx = 0
+    for i in range(6):
+        H[:, i, i] = (fp[:, i] - 2 * f0 + fm[:, i]) / h[i] ** 2
+        for j in range(i + 1, 6):
+            H[:, i, j] = H[:, j, i] = (fpp[:, idx] - fp[:, i] - fp[:, j] + f0) / (h[i] * h[j])
+            idx += 1
+    return f0, g, H
+
+
+def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters: int = 8,
+                  max_step: float = 3.0, lower: np.ndarray | None = None,
+                  upper: np.ndarray | None = None):
+    """Damped Newton steps with finite-difference derivatives, batched over solutions.
+
+    Each iteration costs 28 + 5 evaluations per solution. Directions come from the Hessian with
+    its eigenvalues floored (so the step always descends); steps are capped at ``max_step``
+    difference steps, and a line search over {1, 1/2, 1/4, 1/8, 1/16} keeps a step only when
+    it lowers f1. Unlike a coordinate search, this follows the narrow diagonal valleys that
+    rotation-translation coupling creates.
+
+    Returns
+    -------
+    X : ndarray, shape (k, 7)
+    f1 : ndarray, shape (k,)
+    evaluations : int
+    """
+    X = np.array(X, dtype=np.float64, copy=True)
+    k = len(X)
+    f = None
+    evals = 0
+    alphas = np.array([1.0, 0.5, 0.25, 0.125, 0.0625])
+    active = np.ones(k, dtype=bool)
+    for _ in range(iters):
+        idx = np.flatnonzero(active)
+        if len(idx) == 0:
+            break
+        f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
+        evals += 28 * len(idx)
+        if f is None:
+            f = np.full(k, np.inf)
+        f[idx] = np.minimum(f[idx], f0)
+        # Work in units of h so that metres and degrees are comparable.
+        gs = g * h
+        Hs = H * h[None, :, None] * h[None, None, :]
+        w, V = np.linalg.eigh(Hs)
+        floor = np.maximum(np.abs(w).max(axis=1, keepdims=True) * 1e-3, 1e-9)
+        w = np.maximum(np.abs(w), floor)
+        step = -np.einsum("kij,kj->ki", V, np.einsum("kji,kj->ki", V, gs) / w)
+        norm = np.linalg.norm(step, axis=1, keepdims=True)
+        step *= np.minimum(1.0, max_step / np.maximum(norm, 1e-12))
+        cand = np.repeat(X[idx, None, :], len(alphas), axis=1)
+        cand[:, :, :6] += alphas[None, :, None] * (step * h)[:, None, :]
+        if lower is not None:
+            cand[:, :, :6] = np.clip(cand[:, :, :6], lower[:6], upper[:6])
+        fc = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(len(idx), -1)
+        evals += fc.size
+        best = fc.argmin(axis=1)
+        fbest = fc[np.arange(len(idx)), best]
+        better = fbest < f[idx] - 1e-9
+        X[idx[better]] = cand[better, best[better]]
+        f[idx[better]] = fbest[better]
+        active[idx[~better]] = False
+    if f is None:
+        f = np.asarray(chamfer(X), dtype=np.float64)
+        evals += k
+    return X, f, evals

@@ -1,0 +1,47 @@
+"""Shared fixtures: the real KITTI sample frames (read where they are) and synthetic scenes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def data_dir() -> Path:
+    """``$PARETOCAL_DATA`` or ``../shared/data`` beside the project (the documented default)."""
+    return Path(os.environ.get("PARETOCAL_DATA", ROOT.parent / "shared" / "data")).resolve()
+
+
+@pytest.fixture(scope="session")
+def data() -> Path:
+    d = data_dir()
+    if not (d / "kitti_raw").is_dir():
+        pytest.fail(f"sample data not found at {d}; set PARETOCAL_DATA to the folder holding "
+                    "kitti_raw/ and kitti_object/")
+    return d
+
+
+@pytest.fixture(scope="session")
+def raw_date(data) -> Path:
+    return data / "kitti_raw" / "2011_09_26"
+
+
+@pytest.fixture(scope="session")
+def raw_frames(raw_date):
+    from paretocal.io import load_frames
+
+    return load_frames(raw_date)
+
+
+@pytest.fixture(scope="session")
+def object_dir(data) -> Path:
+    return data / "kitti_object" / "training"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

@@ -1,0 +1,68 @@
+"""Test helpers: generic-layout folders built from real frames, synthetic scenes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+
+def write_generic(root: Path, frames, suffix: str = ".bin", D=None, with_T: bool = True) -> Path:
+    """A generic-layout folder (INTERFACES.md 2c) holding copies of ``frames`` in a temp dir."""
+    (root / "images").mkdir(parents=True, exist_ok=True)
+    (root / "points").mkdir(parents=True, exist_ok=True)
+    f0 = frames[0]
+    calib = {"camera": {"K": f0.camera.K.tolist(), "width": f0.camera.width,
+                        "height": f0.camera.height}}
+    if D is not None:
+        calib["camera"]["D"] = list(map(float, D))
+    if with_T:
+        calib["T_cam_lidar"] = f0.T_ref.tolist()
+    (root / "calib.yaml").write_text(yaml.safe_dump(calib))
+    for f in frames:
+        cv2.imwrite(str(root / "images" / f"{f.name}.png"), f.image)
+        if suffix == ".bin":
+            f.points.astype(np.float32).tofile(root / "points" / f"{f.name}.bin")
+        else:
+            np.save(root / "points" / f"{f.name}.npy", f.points)
+    return root
+
+
+def box_scene(rng, width=640, height=480, f=500.0):
+    """A synthetic camera looking at a box in front of a wall.
+
+    Returns (camera K, image (H, W, 3) uint8, LiDAR points (N, 4) in scan order with 32 rings,
+    T_cam_lidar). LiDAR axes are KITTI's (x forward, y left, z up); the camera sits at the
+    LiDAR origin. The wall is 20 m ahead; the box spans y in [-1, 1] m and z in [-1, 0.5] m at
+    8 m.
+    """
+    K = np.array([[f, 0, width / 2 - 0.5], [0, f, height / 2 - 0.5], [0, 0, 1.0]])
+    T = np.eye(4)
+    T[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]        # LiDAR -> camera axes
+    pts = []
+    for el in np.linspace(-12, 8, 32):                      # one ring per elevation, top first
+        az = np.radians(np.arange(0, 360, 0.2))
+        d = np.stack([np.cos(np.radians(el)) * np.cos(az), np.cos(np.radians(el)) * np.sin(az),
+                      np.full_like(az, np.sin(np.radians(el)))], 1)
+        r = np.full(len(az), np.inf)
+        fwd = d[:, 0] > 0.1
+        r_wall = np.where(fwd, 20.0 / np.maximum(d[:, 0], 1e-9), np.inf)
+        r_box = np.where(fwd, 8.0 / np.maximum(d[:, 0], 1e-9), np.inf)
+        hit = r_box[:, None] * d
+        inbox = fwd & (np.abs(hit[:, 1]) <= 1.0) & (hit[:, 2] >= -1.0) & (hit[:, 2] <= 0.5)
+        r = np.where(inbox, r_box, r_wall)
+        keep = np.isfinite(r) & (r < 60)
+        p = d[keep] * r[keep, None]
+        refl = np.where(inbox[keep], 0.8, 0.2)
+        pts.append(np.column_stack([p, refl]))
+    points = np.vstack(pts).astype(np.float32)
+    # Render the box silhouette as a bright rectangle on a dark wall.
+    img = np.full((height, width, 3), 40, np.uint8)
+    corners = np.array([[8, 1, 0.5], [8, -1, -1.0]])
+    cam = corners @ T[:3, :3].T
+    uv = (cam @ K.T)[:, :2] / cam[:, 2:3]
+    (u0, v0), (u1, v1) = np.round(uv).astype(int)
+    img[v0:v1 + 1, u0:u1 + 1] = 220
+    return K, img, points, T

@@ -1,0 +1,137 @@
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from paretocal.camera import project
+from paretocal.config import Settings
+from paretocal.features import (DEPTH_EDGE, INTENSITY_EDGE, SMOOTH, image_features,
+                                lidar_features, prepare_frame, recover_rings, stratified_order)
+from paretocal.features.rings import elevation_deg, rings_from_elevation, rings_from_scan_order
+
+from .helpers import box_scene
+
+
+class TestRings:
+    def test_kitti_sample_has_64_rings(self, raw_frames):
+        for f in raw_frames:
+            ring = recover_rings(f.points)
+            assert ring.max() + 1 == 64
+            # Each ring is one laser: its median elevation differs from its neighbours'.
+            el = elevation_deg(f.points)
+            med = np.array([np.median(el[ring == k]) for k in range(64)])
+            assert np.unique(np.round(med, 2)).size == 64
+
+    def test_elevation_clustering_is_ordered_on_kitti(self, raw_frames):
+        # KITTI's returns of one laser spread over 0.3-0.6 deg of elevation (more than the ring
+        # spacing), so clusters are approximate there; they must still be ordered like rings.
+        pts = raw_frames[0].points
+        far = np.linalg.norm(pts[:, :3], axis=1) > 15
+        scan = rings_from_scan_order(pts)[far]
+        elev = rings_from_elevation(pts[far])
+        assert 30 <= elev.max() + 1 <= 64
+        el = elevation_deg(pts[far])
+        ids = [k for k in np.unique(scan) if (scan == k).sum() > 200]
+        by_height = sorted(ids, key=lambda k: -np.median(el[scan == k]))
+        med_cluster = [np.median(elev[scan == k]) for k in by_height]
+        assert np.all(np.diff(med_cluster) >= 0)
+
+    def test_elevation_clustering_exact_on_synthetic_shuffled_scan(self, rng):
+        K, img, pts, T = box_scene(rng)
+        truth = rings_from_scan_order(pts)
+        perm = rng.permutation(len(pts))
+        far = np.linalg.norm(pts[perm, :3], axis=1) > 0       # all points
+        elev = rings_from_elevation(pts[perm][far])
+        assert elev.max() + 1 == truth.max() + 1 == 32
+        # The same partition: each scan ring is exactly one elevation cluster.
+        t = truth[perm]
+        mapping = {k: np.unique(elev[t == k]) for k in range(32)}
+        assert all(len(v) == 1 for v in mapping.values())
+        assert len({int(v[0]) for v in mapping.values()}) == 32
+
+    def test_shuffled_cloud_falls_back_to_elevation(self, raw_frames, rng):
+        pts = raw_frames[0].points[rng.permutation(len(raw_frames[0].points))]
+        ring = recover_rings(pts)
+        assert ring.max() + 1 <= 64
+
+
+class TestLidarEdges:
+    def test_box_silhouette(self, rng):
+        K, img, pts, T = box_scene(rng)
+        lf = lidar_features(pts, depth_jump_m=1.0, smooth_ratio=1.0, rng=0)
+        edges = lf.xyz[lf.group == DEPTH_EDGE]
+        assert len(edges) > 50
+        # Only the near side of a jump is an edge: every edge point lies on the box (x = 8 m).
+        np.testing.assert_allclose(edges[:, 0], 8.0, atol=0.05)
+        # Along-ring edges sit at the box's sides, cross-ring edges at its top.
+        side = np.abs(np.abs(edges[:, 1]) - 1.0) < 0.1
+        top = np.abs(edges[:, 2] - 0.5) < 0.2
+        bottom = np.abs(edges[:, 2] + 1.0) < 0.2
+        assert side.sum() > 10 and top.sum() > 10 and bottom.sum() > 10
+        assert (side | top | bottom).all()
+        # Placed midway between the last ray on the box and the first ray past it: within half
+        # a beam spacing (0.2 deg at 8 m = 2.8 cm) of the true silhouette at |y| = 1.
+        np.testing.assert_allclose(np.abs(edges[side & ~top & ~bottom, 1]), 1.0, atol=0.015)
+
+    def test_intensity_edges_only_on_one_surface(self, rng):
+        pts = np.array([[10.0, y, 0.0, 0.1 if y < 4 else 0.9] for y in np.linspace(2, 6, 400)],
+                       dtype=np.float32)
+        lf = lidar_features(pts, ring_method="scan", cross_ring=False, min_range_m=0.5,
+                            smooth_ratio=0.0, rng=0)
+        ie = lf.xyz[lf.group == INTENSITY_EDGE]
+        assert len(ie) == 1 and abs(ie[0, 1] - 4.0) < 0.02
+        assert not (lf.group == DEPTH_EDGE).any()
+
+    def test_smooth_points_are_not_edges(self, rng):
+        K, img, pts, T = box_scene(rng)
+        lf = lidar_features(pts, smooth_ratio=2.0, rng=0)
+        sm = lf.xyz[lf.group == SMOOTH]
+        assert len(sm) > 0
+        assert (np.abs(np.abs(sm[:, 1]) - 1.0) > 0.02).all()
+
+
+class TestImageFeatures:
+    def test_dt_is_exact_distance_at_pixel_centres(self, raw_frames):
+        feats = image_features(raw_frames[0].image, truncation_px=1e6)
+        tree = cKDTree(feats.edge_uv)
+        rng = np.random.default_rng(0)
+        uv = np.column_stack([rng.integers(0, 1242, 2000), rng.integers(0, 375, 2000)])
+        d, _ = tree.query(uv)
+        np.testing.assert_allclose(feats.dt[uv[:, 1], uv[:, 0]], d, atol=1e-3)
+
+    def test_truncation_and_mean(self, raw_frames):
+        feats = image_features(raw_frames[0].image, truncation_px=10)
+        assert feats.dt.max() == pytest.approx(10.0)
+        assert feats.mean_dt == pytest.approx(float(feats.dt.mean()), rel=1e-6)
+
+    def test_small_fragments_removed(self, raw_frames):
+        full = image_features(raw_frames[0].image).edges
+        pruned = image_features(raw_frames[0].image, min_edge_px=30).edges
+        assert 0 < (pruned > 0).sum() < (full > 0).sum()
+        assert not (pruned & ~full).any()
+
+    def test_blank_image_has_no_edges(self):
+        feats = image_features(np.zeros((50, 60, 3), np.uint8))
+        assert len(feats.edge_uv) == 0 and (feats.dt == feats.truncation_px).all()
+
+
+class TestOrdering:
+    def test_permutation_and_proportional_prefixes(self, rng):
+        group = rng.integers(0, 2, 3000).astype(np.int8)
+        cell = rng.integers(0, 32, 3000)
+        order = stratified_order(group, cell, rng)
+        assert np.array_equal(np.sort(order), np.arange(3000))
+        share = group.mean()
+        for n in (50, 200, 1000):
+            assert abs(group[order[:n]].mean() - share) < 2.0 / np.sqrt(n) + 0.02
+
+    def test_prepared_frame_is_in_view_and_seeded(self, raw_frames):
+        s = Settings()
+        f = raw_frames[0]
+        a = prepare_frame(f, f.T_ref, s.features, s.objective, np.random.default_rng(3))
+        b = prepare_frame(f, f.T_ref, s.features, s.objective, np.random.default_rng(3))
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        uv, z, _ = project(a.xyz, f.camera, f.T_ref)
+        m = s.features.view_margin_px
+        assert (z > 0).all() and (uv[:, 0] >= -m).all() and (uv[:, 0] <= 1241 + m).all()
+        counts = a.counts()
+        assert counts["depth_edge"] > 500 and counts["intensity_edge"] == 0  # w_edge = 1
