@@ -26,6 +26,7 @@ log = logging.getLogger("paretocal")
 
 class Rule(str, Enum):
     knee = "knee"
+    knee_chamfer = "knee-chamfer"
     budget = "budget"
     min_chamfer = "min-chamfer"
 

@@ -54,6 +54,7 @@ class ObjectiveSettings:
     contrast: float = 1.0            #: weight of the smooth-point term subtracted (0 disables)
     ucb_k: float | None = None       #: multiplier of the sampling error; None: sqrt(2 ln evals)
     cost: str = "model"              #: "model" (deterministic) or "psutil" (paper, measured)
+    holdout: float = 0.2             #: share of each frame's points kept out of the search
     evaluator: str = "auto"          #: "auto", "numba" or "numpy"
 
 
@@ -79,7 +80,7 @@ class SearchSettings:
 class DecisionSettings:
     """How one solution is chosen from the front (see :mod:`paretocal.decide`)."""
 
-    rule: str = "knee"               #: "knee", "budget" or "min-chamfer"
+    rule: str = "knee"               #: "knee", "knee-chamfer", "budget" or "min-chamfer"
     budget_ms: float | None = None   #: with rule "budget": modelled evaluation time limit (ms)
     refine: bool = True              #: polish the front locally at each solution's n
     refine_iters: int = 12           #: Newton iterations of the polish
@@ -149,12 +150,15 @@ class Settings:
             raise SettingsError(f"--cost {o.cost!r}: choose 'model' or 'psutil'")
         if o.evaluator not in ("auto", "numba", "numpy"):
             raise SettingsError(f"--evaluator {o.evaluator!r}: choose 'auto', 'numba' or 'numpy'")
+        if not 0.0 <= o.holdout < 0.9:
+            raise SettingsError(f"holdout {o.holdout}: must lie in [0, 0.9)")
         if not o.truncation_px > 0:
             raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
         if (o.ucb_k is not None and o.ucb_k < 0) or o.contrast < 0:
             raise SettingsError("ucb_k and contrast must not be negative")
-        if d.rule not in ("knee", "budget", "min-chamfer"):
-            raise SettingsError(f"--rule {d.rule!r}: choose 'knee', 'budget' or 'min-chamfer'")
+        if d.rule not in ("knee", "knee-chamfer", "budget", "min-chamfer"):
+            raise SettingsError(f"--rule {d.rule!r}: choose knee, knee-chamfer, budget or "
+                                "min-chamfer")
         if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
         if f.ring_method not in ("auto", "scan", "elevation"):

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import __version__
 from .config import Settings
-from .decide import choose
+from .decide import choose, reprojection_deviation
 from .errors import DegenerateSceneError, InputError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
@@ -100,8 +100,8 @@ class CalibrationResult:
     def objectives(self) -> dict[str, float]:
         i, c = self.chosen, self.front.columns
         out = {"chamfer": float(self.front.F[i, 0]), "cost": float(self.front.F[i, 1])}
-        for k in ("t_norm", "m_norm", "ms", "bytes", "edge_px", "intensity_px", "smooth_px",
-                  "sampling_se", "in_view"):
+        for k in ("chamfer_holdout", "deviation_px", "t_norm", "m_norm", "ms", "bytes", "edge_px",
+                  "intensity_px", "smooth_px", "sampling_se", "in_view"):
             if k in c:
                 out[k] = float(c[k][i])
         return out
@@ -222,9 +222,14 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
-    feats = prepare_features(frames, T_init, settings, report("features"))
-    _check_scene(feats)
-    scene = build_scene(feats, settings.features.z_min, settings.objective.outside)
+    feats_all = prepare_features(frames, T_init, settings, report("features"))
+    _check_scene(feats_all)
+    o = settings.objective
+    parts = [f.split(o.holdout) for f in feats_all]
+    feats = [p[0] for p in parts]
+    scene = build_scene(feats, settings.features.z_min, o.outside)
+    holdout_scene = (build_scene([p[1] for p in parts], settings.features.z_min, o.outside)
+                     if o.holdout > 0 else None)
     timings["features"] = time.perf_counter() - t0
     n_min, n_max = n_range(settings, scene.points_per_frame)
 
@@ -252,20 +257,37 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         timings["polish"] = time.perf_counter() - t0
 
     T = objective.transforms(X)
-    parts = objective.chamfer(X)
+    chamfer_parts = objective.chamfer(X)
     costs = objective.cost(X)
     columns = {"t_norm": costs["t_norm"], "m_norm": costs["m_norm"], "ms": costs["ms"],
                "bytes": costs["bytes"], "points": costs["points"],
-               "sampling_se": parts["se"], "in_view": parts["in_view"]}
+               "sampling_se": chamfer_parts["se"], "in_view": chamfer_parts["in_view"]}
     for g, name in enumerate(GROUP_NAMES):
         short = {"depth_edge": "edge_px", "intensity_edge": "intensity_px", "smooth": "smooth_px"}
-        columns[short[name]] = parts["mean"][:, g]
+        columns[short[name]] = chamfer_parts["mean"][:, g]
+    if holdout_scene is not None:
+        columns["chamfer_holdout"] = holdout_score(holdout_scene, T_init, settings, X)
+    # How far each solution's calibration moves projections from the best-supported one.
+    best = int(np.argmin(F[:, 0]))
+    check = holdout_scene if holdout_scene is not None else scene
+    columns["deviation_px"] = reprojection_deviation(
+        T, T[best], [check.frame_xyz(f) for f in range(check.n_frames)],
+        [f.camera for f in feats], settings.features.z_min)
     if T_ref is not None:
         for k, v in pose_error(T, T_ref).items():
             columns[f"ref_{k}"] = v
-    i, decision = choose(F, costs["ms"], d.rule, d.budget_ms)
+    if d.rule == "knee":
+        Fd = np.column_stack([columns["deviation_px"], F[:, 1]])
+        candidates = np.sort(front_indices(Fd))
+    else:
+        Fd, candidates = F, np.arange(len(X))
+    j, decision = choose(Fd[candidates], costs["ms"][candidates], d.rule, d.budget_ms)
+    i = int(candidates[j])
     decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                     "polished": bool(d.refine)})
+                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
+                     "deviation_px": float(columns["deviation_px"][i])})
+    if d.rule == "knee":
+        decision["figure"] = "deviation_px vs cost"
     wall = time.perf_counter() - t_start
     timings["total"] = wall
     return CalibrationResult(
@@ -298,6 +320,24 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     Fp = np.column_stack([f1, objective.cost(Xp)["f2"]])
     Xf, Ff = front_of(Xp, Fp)
     return Xf, Ff, evals
+
+
+def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:
+    """Each solution's pose scored on every held-out point (no sampling-error term), shape (k,)."""
+    from .objective.cost import CostModel
+
+    dummy = CostModel(0.0, 1.0, 0.0, 1.0, 0, 1, {})
+    obj = CalibrationObjective(scene, T_init, settings.objective, dummy, ucb_k=0.0)
+    Xa = np.array(X, dtype=np.float64, copy=True)
+    Xa[:, 6] = int(scene.points_per_frame.max())
+    return obj.chamfer(Xa)["f1"]
+
+
+def front_indices(F: np.ndarray) -> np.ndarray:
+    """Indices of the non-dominated rows of F (k, 2)."""
+    from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+    return np.asarray(NonDominatedSorting().do(F, only_non_dominated_front=True), dtype=np.int64)
 
 
 def _feature_counts(feats: list[FrameFeatures]) -> dict:

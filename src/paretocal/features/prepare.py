@@ -45,6 +45,20 @@ class FrameFeatures:
     weight: np.ndarray
     n_rings: int
 
+    def split(self, holdout: float) -> tuple["FrameFeatures", "FrameFeatures"]:
+        """The search part (the first points of the order) and a held-out tail.
+
+        Because the order is stratified, the tail is a representative sample that the search
+        never sees: it scores each solution's pose without the optimiser's selection bias.
+        """
+        m = len(self.xyz)
+        cut = m - int(round(holdout * m))
+        head = FrameFeatures(self.name, self.camera, self.image, self.xyz[:cut],
+                             self.group[:cut], self.weight[:cut], self.n_rings)
+        tail = FrameFeatures(self.name, self.camera, self.image, self.xyz[cut:],
+                             self.group[cut:], self.weight[cut:], self.n_rings)
+        return head, tail
+
     def counts(self) -> dict[str, int]:
         """Number of points per feature group."""
         return {g: int((self.group == i).sum()) for i, g in enumerate(GROUP_NAMES)}

@@ -24,8 +24,8 @@ def front_csv(result) -> str:
     """``pareto.csv`` text: one row per front solution, the chosen one flagged."""
     front = result.front
     cols = front.columns
-    extra = [k for k in ("points", "edge_px", "intensity_px", "smooth_px", "sampling_se",
-                         "in_view") if k in cols]
+    extra = [k for k in ("chamfer_holdout", "deviation_px", "points", "edge_px",
+                         "intensity_px", "smooth_px", "sampling_se", "in_view") if k in cols]
     ref = [k for k in cols if k.startswith("ref_")]
     header = FRONT_CSV_FIXED + extra + ref + ["chosen"]
     buf = io.StringIO()
