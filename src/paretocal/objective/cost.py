@@ -60,14 +60,14 @@ class CostModel:
         return self.bytes_fixed + self.bytes_per_point * np.asarray(points, dtype=np.float64)
 
     def normalised(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """``(t_norm, m_norm)``, each min-max normalised over the search's range."""
+        """``(t_norm, m_norm)``, each min-max normalised over the search's range.
+
+        For affine models with positive slopes both equal ``(P - P_min) / (P_max - P_min)``
+        exactly; computing them that way keeps them bitwise independent of the timing.
+        """
         p = np.asarray(points, dtype=np.float64)
-        span = max(self.points_max - self.points_min, 1)
-        t0, t1 = self.time_ms(self.points_min), self.time_ms(self.points_max)
-        m0, m1 = self.nbytes(self.points_min), self.nbytes(self.points_max)
-        t = (self.time_ms(p) - t0) / (t1 - t0) if t1 > t0 else (p - self.points_min) / span
-        m = (self.nbytes(p) - m0) / (m1 - m0) if m1 > m0 else (p - self.points_min) / span
-        return t, m
+        u = (p - self.points_min) / max(self.points_max - self.points_min, 1)
+        return u, u.copy()
 
     def to_dict(self) -> dict:
         return asdict(self)

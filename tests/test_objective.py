@@ -1,0 +1,143 @@
+import numpy as np
+import pytest
+
+from paretocal.config import Settings
+from paretocal.geometry import apply_correction
+from paretocal.objective import (CalibrationObjective, build_scene, combine, get_evaluator,
+                                 measure_cost_model, paper_chamfer, sums_kdtree, sums_numba,
+                                 sums_numpy)
+from paretocal.pipeline import prepare_features
+
+
+@pytest.fixture(scope="module")
+def scene_and_feats(raw_frames):
+    s = Settings()
+    frames = raw_frames[:3]
+    feats = prepare_features(frames, frames[0].T_ref, s)
+    return build_scene(feats), feats, frames[0].T_ref
+
+
+def _population(T, n_max, rng, C=24):
+    X = np.zeros((C, 7))
+    X[:, :3] = rng.uniform(-0.2, 0.2, (C, 3))
+    X[:, 3:6] = rng.uniform(-3, 3, (C, 3))
+    X[:, 6] = rng.integers(5, n_max, C)
+    X[0] = 0
+    X[0, 6] = n_max
+    return X
+
+
+class TestEvaluators:
+    def test_numba_equals_numpy(self, scene_and_feats, rng):
+        scene, feats, T = scene_and_feats
+        X = _population(T, int(scene.points_per_frame.max()), rng)
+        A = scene.projections(apply_correction(T, X))
+        n = X[:, 6].astype(np.int64)
+        a, b = sums_numba(scene, A, n), sums_numpy(scene, A, n)
+        for u, v in zip(a, b):
+            np.testing.assert_allclose(u, v, rtol=1e-9, atol=1e-6)
+
+    def test_close_to_exact_kdtree_oracle(self, scene_and_feats, rng):
+        scene, feats, T = scene_and_feats
+        X = _population(T, int(scene.points_per_frame.max()), rng, C=8)
+        A = scene.projections(apply_correction(T, X))
+        n = X[:, 6].astype(np.int64)
+        S1, _, nin = sums_numba(scene, A, n)
+        K1, _, kin = sums_kdtree(scene, [f.image.edge_uv for f in feats], A, n)
+        np.testing.assert_array_equal(nin, kin)
+        # Bilinear interpolation of the exact EDT vs the exact distance at the same point:
+        # the mean per-point difference is a small fraction of a pixel.
+        per_point = np.abs(S1 - K1).sum() / np.maximum(scene.points_used(n), 1).sum()
+        assert per_point < 0.1
+
+    def test_out_of_view_points_cost_the_outside_charge(self, scene_and_feats):
+        scene, feats, T = scene_and_feats
+        T_away = T.copy()
+        T_away[:3, 3] += [0.0, 0.0, -500.0]           # everything behind the camera
+        A = scene.projections(T_away[None])
+        n = np.array([int(scene.points_per_frame.max())])
+        S1, S2, nin = sums_numba(scene, A, n)
+        assert nin.sum() == 0
+        expect = scene.outside * scene.points_per_frame  # unweighted points
+        np.testing.assert_allclose(S1[0].sum(axis=1), expect, rtol=1e-5)
+
+    def test_objective_is_invariant_to_frame_order_within_a_prefix(self, scene_and_feats, rng):
+        scene, feats, T = scene_and_feats
+        # The same points in reverse frame order give the same mean over frames.
+        rev = build_scene(feats[::-1])
+        s = Settings()
+        cm = measure_cost_model(scene, sums_numba, T, 10, 100, candidates=4, repeats=1)
+        X = _population(T, 100, rng, C=6)
+        f_a = CalibrationObjective(scene, T, s.objective, cm, ucb_k=2.0).chamfer(X)["f1"]
+        f_b = CalibrationObjective(rev, T, s.objective, cm, ucb_k=2.0).chamfer(X)["f1"]
+        np.testing.assert_allclose(f_a, f_b, rtol=1e-10)
+
+    def test_auto_prefers_numba(self):
+        assert get_evaluator("auto") is sums_numba
+        assert get_evaluator("numpy") is sums_numpy
+
+
+class TestCombine:
+    def test_hand_computed(self):
+        # One candidate, one frame, groups: depth edges {1, 3}, none, smooth {4}.
+        S1 = np.array([[[4.0, 0.0, 4.0]]])
+        S2 = np.array([[[10.0, 0.0, 16.0]]])
+        W1 = np.array([[[2.0, 0.0, 1.0]]])
+        W2 = W1.copy()
+        w = np.array([1.0, 0.0, -0.5])
+        out = combine(S1, S2, W1, W2, np.array([7.0]), w, ucb_k=0.0)
+        assert out["f1"][0] == pytest.approx(2.0 - 0.5 * 4.0)
+        k = combine(S1, S2, W1, W2, np.array([7.0]), w, ucb_k=3.0)
+        # Sample variance of {1, 3} is 2; SE of the mean = sqrt(2 / 2) = 1 (smooth: 1 point).
+        assert k["se"][0] == pytest.approx(1.0)
+        assert k["f1"][0] == pytest.approx(out["f1"][0] + 3.0)
+
+    def test_sampling_error_shrinks_with_n(self, scene_and_feats):
+        scene, feats, T = scene_and_feats
+        s = Settings()
+        cm = measure_cost_model(scene, sums_numba, T, 10, 300, candidates=4, repeats=1)
+        obj = CalibrationObjective(scene, T, s.objective, cm, ucb_k=4.0)
+        X = np.zeros((3, 7))
+        X[:, 6] = [20, 100, 300]
+        se = obj.chamfer(X)["se"]
+        assert se[0] > se[1] > se[2] > 0
+
+
+class TestPaperChamfer:
+    def test_matches_brute_force(self, rng):
+        from types import SimpleNamespace
+
+        pts = rng.uniform(-1, 1, (30, 3)) + [0, 0, 5]
+        scene = SimpleNamespace(x=pts[:, 0].astype(np.float32), y=pts[:, 1].astype(np.float32),
+                                z=pts[:, 2].astype(np.float32), point_start=np.array([0, 30]),
+                                z_min=0.1)
+        edges = rng.uniform(0, 100, (40, 2))
+        A = np.zeros((1, 1, 3, 4))
+        A[0, 0, :, :3] = [[50, 0, 50], [0, 50, 50], [0, 0, 1]]
+        n = np.array([12])
+        got = paper_chamfer(scene, [edges], A, n)[0]
+        p = pts[:12].astype(np.float32).astype(np.float64)
+        uv = (p @ A[0, 0, :, :3].T)[:, :2] / p[:, 2:3]
+        d2 = ((edges[:, None, :] - uv[None]) ** 2).sum(-1).min(axis=1)
+        assert got == pytest.approx(d2.sum() / 12, rel=1e-9)
+
+
+class TestCostModel:
+    def test_monotone_and_normalised(self, scene_and_feats):
+        scene, feats, T = scene_and_feats
+        cm = measure_cost_model(scene, sums_numba, T, 10, 500, candidates=16, repeats=3)
+        pts = scene.points_used(np.array([10, 100, 500]))
+        t, m = cm.normalised(pts)
+        np.testing.assert_allclose([t[0], m[0], t[-1], m[-1]], [0, 0, 1, 1], atol=1e-12)
+        assert np.all(np.diff(cm.time_ms(pts)) > 0) and np.all(np.diff(cm.nbytes(pts)) > 0)
+        assert cm.bytes_fixed >= scene.dt.nbytes
+
+    def test_normalised_cost_does_not_depend_on_the_timing(self, scene_and_feats):
+        # Two different measured lines give the same normalised cost: the search stays
+        # deterministic while the absolute figures reflect this machine.
+        from paretocal.objective.cost import CostModel
+
+        a = CostModel(0.01, 1e-5, 1e6, 13, 100, 5000, {})
+        b = CostModel(0.5, 3e-4, 1e6, 13, 100, 5000, {})
+        p = np.array([100, 700, 5000])
+        np.testing.assert_allclose(sum(a.normalised(p)), sum(b.normalised(p)), atol=1e-12)
