@@ -111,6 +111,10 @@ def calibrate(
         "--budget-ms", help="Choose the best Chamfer whose modelled evaluation time is within "
                             "this many ms, instead of the knee.")] = None,
     rule: Annotated[Optional[Rule], typer.Option(help="Decision rule.")] = None,
+    max_deviation: Annotated[Optional[float], typer.Option(
+        "--max-deviation", help="Knee rule: consider only solutions whose calibration moves "
+                                "projections at most this many px from the best-supported "
+                                "one (default 1).")] = None,
     n_min: Annotated[Optional[int], typer.Option("--n-min", help="Fewest feature points per frame.")] = None,
     n_max: Annotated[Optional[int], typer.Option("--n-max", help="Most feature points per frame.")] = None,
     bound_t: Annotated[Optional[float], typer.Option("--bound-t", help="Translation bound (+- m).")] = None,
@@ -144,7 +148,7 @@ def calibrate(
                    "cost": cost.value if cost else None,
                    "evaluator": evaluator.value if evaluator else None},
         decision={"rule": rule.value if rule else None, "budget_ms": budget_ms,
-                  "refine": polish})
+                  "refine": polish, "max_deviation_px": max_deviation})
     import dataclasses
     if camera is not None or frames is not None:
         settings = dataclasses.replace(settings, camera=camera if camera is not None

@@ -30,8 +30,9 @@ class FeatureSettings:
     cross_ring: bool = True          #: also detect edges against the rings above and below
     cross_jump_m: float = 0.3        #: across rings: jump > max(cross_jump_m, cross_jump_rel * r)
     cross_jump_rel: float = 0.25
+    ground_tol_m: float | None = None  #: ignore cross-ring pairs with both returns on the ground
     along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
-    cross_fraction: float = 0.5      #: the same across rings
+    cross_fraction: float = 0.25     #: the same across rings (see README, Method)
     intensity_jump: float = 0.3      #: reflectance jump for an intensity edge
     min_range_m: float = 1.5
     max_range_m: float = 70.0
@@ -54,7 +55,7 @@ class ObjectiveSettings:
     contrast: float = 1.0            #: weight of the smooth-point term subtracted (0 disables)
     ucb_k: float | None = None       #: multiplier of the sampling error; None: sqrt(2 ln evals)
     cost: str = "model"              #: "model" (deterministic) or "psutil" (paper, measured)
-    holdout: float = 0.2             #: share of each frame's points kept out of the search
+    holdout: float = 0.0             #: share of each frame's points kept out of the search
     evaluator: str = "auto"          #: "auto", "numba" or "numpy"
 
 
@@ -82,6 +83,7 @@ class DecisionSettings:
 
     rule: str = "knee"               #: "knee", "knee-chamfer", "budget" or "min-chamfer"
     budget_ms: float | None = None   #: with rule "budget": modelled evaluation time limit (ms)
+    max_deviation_px: float = 1.0    #: knee: only solutions this close to the best-supported one
     refine: bool = True              #: polish the front locally at each solution's n
     refine_iters: int = 12           #: Newton iterations of the polish
 
@@ -159,6 +161,8 @@ class Settings:
         if d.rule not in ("knee", "knee-chamfer", "budget", "min-chamfer"):
             raise SettingsError(f"--rule {d.rule!r}: choose knee, knee-chamfer, budget or "
                                 "min-chamfer")
+        if not d.max_deviation_px > 0:
+            raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
         if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
         if f.ring_method not in ("auto", "scan", "elevation"):

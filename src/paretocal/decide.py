@@ -6,8 +6,12 @@
   points) puts them. The Chamfer value itself is a poor guide to a pose's accuracy: on the
   KITTI sample, cheap solutions sat in a neighbouring pitch / height basin (0.6 deg, 9 cm off)
   whose Chamfer, on search or held-out points alike, was within 0.01 px of the right one,
-  while their deviation was about 8 px. The knee of deviation vs cost is where using fewer
-  points starts to move the calibration.
+  while their deviation was 2-3 px. The knee of log10(deviation + 0.1 px) vs cost is where
+  using fewer points starts to move the calibration (the log keeps one wild cheap solution
+  from flattening the rest of the curve; 0.1 px is where differences stop mattering). Only
+  solutions within ``max_deviation_px`` (1 px) of the best-supported one are candidates: on
+  the sample, some seeds left most of the front in the neighbouring basin (2 px away, 0.5 deg
+  off), and the knee of such a front is a cheap wrong answer.
 * ``knee-chamfer``: the paper's rule, the knee of the Chamfer-vs-cost front itself.
 * Knee: the solution farthest below the straight line joining the two ends of the front, in
   objectives min-max normalised over the front. On a convex front this is where a further

@@ -27,6 +27,7 @@ log = logging.getLogger(__name__)
 
 MIN_POINTS_PER_FRAME = 30
 DEFAULT_N_MIN = 20
+DEVIATION_FLOOR_PX = 0.1  # deviations below this are equally good for the knee
 FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps after Newton
 
 
@@ -277,8 +278,15 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         for k, v in pose_error(T, T_ref).items():
             columns[f"ref_{k}"] = v
     if d.rule == "knee":
-        Fd = np.column_stack([columns["deviation_px"], F[:, 1]])
+        # Deviations span orders of magnitude (tens of px at the cheapest end, hundredths at
+        # the dearest): judge them on a log scale, floored where differences stop mattering.
+        dev = np.log10(columns["deviation_px"] + DEVIATION_FLOOR_PX)
+        Fd = np.column_stack([dev, F[:, 1]])
         candidates = np.sort(front_indices(Fd))
+        # A cheaper solution is acceptable only if its calibration agrees with the
+        # best-supported one: a neighbouring minimum can win on a small sample.
+        agree = columns["deviation_px"][candidates] <= d.max_deviation_px
+        candidates = candidates[agree | (candidates == best)]
     else:
         Fd, candidates = F, np.arange(len(X))
     j, decision = choose(Fd[candidates], costs["ms"][candidates], d.rule, d.budget_ms)
@@ -287,7 +295,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                      "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
                      "deviation_px": float(columns["deviation_px"][i])})
     if d.rule == "knee":
-        decision["figure"] = "deviation_px vs cost"
+        decision["figure"] = "log10(deviation_px + 0.1) vs cost"
+        decision["max_deviation_px"] = float(d.max_deviation_px)
     wall = time.perf_counter() - t_start
     timings["total"] = wall
     return CalibrationResult(
@@ -305,21 +314,68 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
     the diagonal valleys of the objective; a short compass search then settles each solution.
-
     The grid fills parts of the n range the search's front did not reach, so the final front
     shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
+
+    Then the weakly determined directions of the best pose are explored: edge alignment
+    constrains some combinations poorly (a small pitch against a few centimetres of height
+    aligns everything near one depth), and a neighbouring minimum along such a valley can be
+    almost as good. Starts along the two flattest eigen-directions of the Hessian at the
+    largest n are polished; if one is better, the grid is polished again from it.
     """
-    best = X[np.argmin(F[:, 0])]
-    ns = np.unique(np.rint(np.geomspace(max(n_min, 1), n_max, grid)))
-    seeds = np.vstack([X, np.column_stack([np.tile(best[:6], (len(ns), 1)), ns])])
     xl, xu = bounds(settings.search, n_min, n_max)
     fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
-    Xp, _, ev1 = newton_polish(fun, seeds, iters=settings.decision.refine_iters, lower=xl, upper=xu)
-    Xp, f1, ev2 = polish(fun, Xp, step=FINISH_STEP, lower=xl, upper=xu)
-    evals = ev1 + ev2
-    Fp = np.column_stack([f1, objective.cost(Xp)["f2"]])
-    Xf, Ff = front_of(Xp, Fp)
+    iters = settings.decision.refine_iters
+    evals = 0
+
+    def run(seeds):
+        nonlocal evals
+        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu)
+        Z, f, e2 = polish(fun, Z, step=FINISH_STEP, lower=xl, upper=xu)
+        evals += e1 + e2
+        return Z, f
+
+    ns = np.unique(np.rint(np.geomspace(max(n_min, 1), n_max, grid)))
+
+    def with_grid(pose):
+        return np.column_stack([np.tile(pose[:6], (len(ns), 1)), ns])
+
+    best = X[np.argmin(F[:, 0])]
+    P, fP = run(np.vstack([X, with_grid(best)]))
+    top = np.flatnonzero(P[:, 6] == P[:, 6].max())
+    anchor = P[top[np.argmin(fP[top])]]
+    starts = valley_starts(fun, anchor)
+    evals += 28
+    V, fV = run(starts)
+    if fV.min() < fP[top].min() - 1e-9:
+        G, fG = run(with_grid(V[np.argmin(fV)]))
+        P, fP = np.vstack([P, V, G]), np.concatenate([fP, fV, fG])
+    else:
+        P, fP = np.vstack([P, V]), np.concatenate([fP, fV])
+    Fp = np.column_stack([fP, objective.cost(P)["f2"]])
+    Xf, Ff = front_of(P, Fp)
     return Xf, Ff, evals
+
+
+def valley_starts(fun, x: np.ndarray, directions: int = 2,
+                  offsets=(-8.0, -4.0, 4.0, 8.0)) -> np.ndarray:
+    """Starts along the flattest Hessian eigen-directions of f1 at ``x`` (7,), shape (k, 7).
+
+    Offsets are in units of the finite-difference steps (1 cm, 0.1 deg), so 8 units moves the
+    pose by up to 8 cm or 0.8 deg along the valley.
+    """
+    from .search.polish import DEFAULT_FD_STEP, fd_gradient_hessian
+
+    h = DEFAULT_FD_STEP
+    _, _, H = fd_gradient_hessian(fun, x[None], h)
+    w, V = np.linalg.eigh(H[0] * h[:, None] * h[None, :])
+    out = []
+    for d in range(directions):
+        for o in offsets:
+            z = x.copy()
+            z[:6] += o * V[:, d] * h
+            out.append(z)
+    return np.array(out)
 
 
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:

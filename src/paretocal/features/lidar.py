@@ -53,6 +53,7 @@ def _between_rays(p: np.ndarray, q: np.ndarray, r: np.ndarray, t: float) -> np.n
 
 def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
                    cross_jump_m: float = 0.3, cross_jump_rel: float = 0.25,
+                   ground_tol_m: float | None = None,
                    intensity_jump: float = 0.3, min_range_m: float = 1.5,
                    max_range_m: float = 70.0, max_gap_deg: float = 1.0,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
@@ -71,6 +72,10 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     cross_jump_m, cross_jump_rel : float
         Across rings the far return must be farther by ``max(cross_jump_m, cross_jump_rel * r)``
         (the relative part keeps the ground, seen at grazing angles, from making edges).
+    ground_tol_m : float, optional
+        When set, a pair across rings whose two returns both lie within this height of the
+        ground (the 5th percentile of z within 30 m) is never an edge, which lets a smaller
+        ``cross_jump_rel`` find far horizontal contours without ground artefacts.
     intensity_jump : float
         Minimum reflectance difference between neighbours on one surface for an intensity edge.
     min_range_m, max_range_m : float
@@ -132,6 +137,11 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     strength = np.where(is_edge, jump, 0.0)
 
     if cross_ring:
+        on_ground = np.zeros(n, dtype=bool)
+        if ground_tol_m is not None:
+            near = np.hypot(xyz[:, 0], xyz[:, 1]) < 30.0
+            z_ground = np.percentile(xyz[near, 2], 5) if near.any() else xyz[:, 2].min()
+            on_ground = xyz[:, 2] < z_ground + ground_tol_m
         # Rank rings by elevation so that "above" and "below" are geometric neighbours.
         el = elevation_deg(xyz)
         ids = np.unique(ring)
@@ -144,7 +154,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                 cand = other[j]
                 thr = np.maximum(cross_jump_m, cross_jump_rel * r[near])
                 cj = r[cand] - r[near]
-                hit = (dpsi < gap) & (cj > thr) & ~is_edge[near]
+                hit = (dpsi < gap) & (cj > thr) & ~is_edge[near] & ~(on_ground[near]
+                                                                     & on_ground[cand])
                 idx = near[hit]
                 edge_pos[idx] = _between_rays(xyz[idx], xyz[cand[hit]], r[idx], cross_fraction)
                 strength[idx] = cj[hit]

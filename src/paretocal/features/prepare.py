@@ -98,6 +98,7 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     lf: LidarFeatures = lidar_features(
         frame.points, depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
         cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
+        ground_tol_m=features.ground_tol_m,
         intensity_jump=features.intensity_jump, min_range_m=features.min_range_m,
         max_range_m=features.max_range_m,
         smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,

@@ -1,0 +1,144 @@
+"""The command line end to end on real frames, and its handling of bad input."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from paretocal.cli import main
+from paretocal.io import read_extrinsic
+
+from .helpers import write_generic
+
+FAST = ["--pop", "16", "--gens", "3", "--frames", "0:2", "--no-polish"]
+
+
+def _run(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def init_file(tmp_path_factory, raw_date):
+    p = tmp_path_factory.mktemp("init") / "init.yaml"
+    assert main(["perturb", str(raw_date), "--out", str(p), "--rot", "2", "--trans", "0.1",
+                 "--seed", "5"]) == 0
+    return p
+
+
+class TestCalibrate:
+    def test_end_to_end_writes_the_run_directory(self, tmp_path, raw_date, init_file, capsys):
+        out = tmp_path / "run"
+        code, stdout, err = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
+                                 "--pop", "16", "--gens", "3", "--frames", "0:2", "--seed", "1")
+        assert code == 0, err
+        assert "chosen n =" in stdout and "error vs reference" in stdout
+        for name in ("result.json", "pareto.csv", "extrinsic.yaml", "pareto.png",
+                     "overlay_before.png", "overlay_after.png", "overlay_reference.png"):
+            assert (out / name).stat().st_size > 0, name
+        doc = json.loads((out / "result.json").read_text())
+        assert doc["seed"] == 1 and doc["config"]["search"]["pop"] == 16
+        assert doc["frames"] == ["0000000000", "0000000001"]
+        assert doc["reference_error"]["rotation_deg"] < 10
+        T = read_extrinsic(out / "extrinsic.yaml")
+        np.testing.assert_allclose(T, doc["T_cam_lidar"], atol=1e-8)
+        rows = (out / "pareto.csv").read_text().splitlines()
+        header = rows[0].split(",")
+        for col in ("x", "y", "z", "yaw", "pitch", "roll", "n", "chamfer", "cost", "ms", "bytes",
+                    "ref_rotation_deg", "ref_translation_cm", "chosen"):
+            assert col in header
+        assert sum(r.endswith(",1") for r in rows[1:]) == 1
+        assert not list(out.glob(".*tmp*"))                     # no temporary files left
+
+    def test_result_can_be_the_next_init(self, tmp_path, raw_date, init_file, capsys):
+        a = tmp_path / "a"
+        assert _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", a, *FAST,
+                    "--no-figures")[0] == 0
+        b = tmp_path / "b"
+        code, _, err = _run(capsys, "calibrate", raw_date, "--init", a / "extrinsic.yaml",
+                            "--out", b, *FAST, "--no-figures")
+        assert code == 0, err
+
+    def test_config_file_and_budget(self, tmp_path, raw_date, init_file, capsys):
+        cfg = tmp_path / "cfg.yaml"
+        cfg.write_text(yaml.safe_dump({"search": {"pop": 12, "gens": 2},
+                                       "objective": {"w_edge": 0.8}}))
+        out = tmp_path / "run"
+        code, _, err = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
+                            "--config", cfg, "--frames", "0", "--budget-ms", "1000",
+                            "--no-figures", "--no-polish")
+        assert code == 0, err
+        doc = json.loads((out / "result.json").read_text())
+        assert doc["config"]["search"]["pop"] == 12
+        assert doc["config"]["objective"]["w_edge"] == 0.8
+        assert doc["decision"]["rule"] == "budget" and doc["objectives"]["ms"] <= 1000
+
+    def test_console_script(self, tmp_path):
+        exe = shutil.which("paretocal", path=str(__import__("pathlib").Path(sys.executable).parent))
+        assert exe, "console script not installed"
+        r = subprocess.run([exe, "--help"], capture_output=True, text=True)
+        assert r.returncode == 0 and "calibrate" in r.stdout
+
+
+class TestBadInput:
+    """Each exits 2 with one line on stderr that names the file or option."""
+
+    def _bad(self, capsys, *args, expect):
+        code, out, err = _run(capsys, *args)
+        assert code == 2, (out, err)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("paretocal: error:"), err
+        assert expect in lines[0], lines[0]
+        return lines[0]
+
+    def test_missing_source(self, capsys, tmp_path):
+        self._bad(capsys, "calibrate", tmp_path / "nope", "--out", tmp_path / "o",
+                  expect="source folder not found")
+
+    def test_missing_calibration(self, capsys, tmp_path, raw_date):
+        drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0001_sync"
+        shutil.copytree(raw_date / "2011_09_26_drive_sample_sync", drive)
+        shutil.copy(raw_date / "calib_cam_to_cam.txt", tmp_path / "2011_09_26")
+        self._bad(capsys, "calibrate", drive, "--out", tmp_path / "o",
+                  expect="calib_velo_to_cam.txt: calibration file not found")
+
+    def test_corrupt_bin(self, capsys, tmp_path, raw_frames):
+        root = write_generic(tmp_path / "rig", raw_frames[:1])
+        p = root / "points" / f"{raw_frames[0].name}.bin"
+        p.write_bytes(p.read_bytes()[:-5])
+        self._bad(capsys, "calibrate", root, "--out", tmp_path / "o",
+                  expect="not a multiple of 16")
+
+    def test_images_and_points_do_not_pair(self, capsys, tmp_path, raw_frames):
+        root = write_generic(tmp_path / "rig", raw_frames[:1])
+        (root / "points" / f"{raw_frames[0].name}.bin").rename(root / "points" / "x.bin")
+        self._bad(capsys, "calibrate", root, "--out", tmp_path / "o", expect="share no file stem")
+
+    def test_bad_init(self, capsys, tmp_path, raw_date):
+        bad = tmp_path / "init.yaml"
+        bad.write_text("T_cam_lidar: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]]\n")
+        self._bad(capsys, "calibrate", raw_date, "--init", bad, "--out", tmp_path / "o",
+                  expect="not a rotation matrix")
+
+    def test_frames_matching_nothing(self, capsys, tmp_path, raw_date):
+        self._bad(capsys, "calibrate", raw_date, "--frames", "99", "--out", tmp_path / "o",
+                  expect="--frames 99")
+
+    def test_unknown_option(self, capsys, tmp_path, raw_date):
+        self._bad(capsys, "calibrate", raw_date, "--out", tmp_path / "o", "--bogus",
+                  expect="--bogus")
+
+    def test_bad_value(self, capsys, tmp_path, raw_date):
+        self._bad(capsys, "calibrate", raw_date, "--out", tmp_path / "o", "--w-edge", "1.5",
+                  expect="--w-edge 1.5")
+
+    def test_unknown_config_key(self, capsys, tmp_path, raw_date):
+        cfg = tmp_path / "c.yaml"
+        cfg.write_text("search: {popsize: 3}\n")
+        self._bad(capsys, "calibrate", raw_date, "--out", tmp_path / "o", "--config", cfg,
+                  expect="popsize")
