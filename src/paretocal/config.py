@@ -40,6 +40,7 @@ class FeatureSettings:
     ring_method: str = "auto"        #: "auto", "scan" or "elevation"
     view_margin_px: float = 60.0     #: keep feature points projecting this far outside the image
     z_min: float = 0.1               #: minimum depth (m) of a projectable point
+    reselect: bool = True            #: after the search, choose the points in view again
     grid: tuple[int, int] = (8, 4)   #: image cells (columns, rows) stratifying the point order
     edge_weight: str = "none"        #: "none" or "sqrt_jump" (weight depth edges by strength)
 
@@ -75,6 +76,10 @@ class SearchSettings:
     pm_eta: float = 20.0
     eliminate_duplicates: bool = False
     include_init: bool = True        #: seed the population with the zero correction
+    seed_grid_deg: float | None = 2.5  #: rotation grid step for seeding (None: no grid)
+    seed_truncation_px: float = 30.0  #: coarse objective's DT truncation for the grid
+    seed_points: int = 200           #: points per frame for the grid
+    seed_count: int = 8              #: grid poses placed in the initial population
 
 
 @dataclass(frozen=True)

@@ -175,6 +175,23 @@ def _check_scene(feats: list[FrameFeatures]) -> None:
             f"{MIN_POINTS_PER_FRAME} per frame: {', '.join(few[:5])}); check --init and the camera")
 
 
+def _scenes(frames: list[Frame], T_view: np.ndarray, settings: Settings, progress=None):
+    """Features of every frame as seen from ``T_view``, laid out for the evaluators.
+
+    Returns the per-frame features (search part), the search scene and the held-out scene
+    (None without a holdout).
+    """
+    feats_all = prepare_features(frames, T_view, settings, progress)
+    _check_scene(feats_all)
+    o = settings.objective
+    parts = [f.split(o.holdout) for f in feats_all]
+    feats = [p[0] for p in parts]
+    scene = build_scene(feats, settings.features.z_min, o.outside)
+    holdout = (build_scene([p[1] for p in parts], settings.features.z_min, o.outside)
+               if o.holdout > 0 else None)
+    return feats, scene, holdout
+
+
 def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]:
     """The search's range of points per frame, validated against what the frames hold."""
     most = int(points_per_frame.max())
@@ -223,14 +240,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
-    feats_all = prepare_features(frames, T_init, settings, report("features"))
-    _check_scene(feats_all)
-    o = settings.objective
-    parts = [f.split(o.holdout) for f in feats_all]
-    feats = [p[0] for p in parts]
-    scene = build_scene(feats, settings.features.z_min, o.outside)
-    holdout_scene = (build_scene([p[1] for p in parts], settings.features.z_min, o.outside)
-                     if o.holdout > 0 else None)
+    feats, scene, holdout_scene = _scenes(frames, T_init, settings, report("features"))
     timings["features"] = time.perf_counter() - t0
     n_min, n_max = n_range(settings, scene.points_per_frame)
 
@@ -245,7 +255,12 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                             f"n = {n_min}); raise the budget or lower --n-min")
     objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
                                      [f.image.edge_uv for f in feats], ucb_k=settings.ucb_k)
-    res = run_nsga2(objective, settings.search, n_min, n_max, report("search"))
+    seeds = None
+    if settings.search.seed_grid_deg:
+        t0 = time.perf_counter()
+        seeds = coarse_seeds(feats, T_init, settings, cost_model, n_max)
+        timings["seed_grid"] = time.perf_counter() - t0
+    res = run_nsga2(objective, settings.search, n_min, n_max, report("search"), seeds=seeds)
     timings["search"] = res.wall_s
     timings["search_objective"] = res.objective_s
 
@@ -256,6 +271,24 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         X, F, ev = polish_front(objective, X, F, settings, n_min, n_max)
         evaluations += ev
         timings["polish"] = time.perf_counter() - t0
+        if settings.features.reselect:
+            # Choose the feature points again, by what is in view at the estimate rather than
+            # at the initial guess: points the initial guess wrongly kept (or dropped) bias the
+            # objective, and that bias grows with the initial error.
+            t0 = time.perf_counter()
+            T_est = objective.transforms(X[np.argmin(F[:, 0])][None])[0]
+            feats, scene, holdout_scene = _scenes(frames, T_est, settings)
+            n_min, n_max = n_range(settings, scene.points_per_frame)
+            cost_model = measure_cost_model(scene, get_evaluator(settings.objective.evaluator),
+                                            T_est, n_min, n_max)
+            objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
+                                             [f.image.edge_uv for f in feats],
+                                             ucb_k=settings.ucb_k)
+            X = X.copy()
+            X[:, 6] = np.clip(X[:, 6], n_min, n_max)
+            X, F, ev = polish_front(objective, X, objective.evaluate(X), settings, n_min, n_max)
+            evaluations += ev + len(X)
+            timings["reselect"] = time.perf_counter() - t0
 
     T = objective.transforms(X)
     chamfer_parts = objective.chamfer(X)
@@ -321,7 +354,8 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     constrains some combinations poorly (a small pitch against a few centimetres of height
     aligns everything near one depth), and a neighbouring minimum along such a valley can be
     almost as good. Starts along the two flattest eigen-directions of the Hessian at the
-    largest n are polished; if one is better, the grid is polished again from it.
+    largest n are polished, and the best pose at the largest n then seeds every n of the
+    front again; each n keeps whichever basin scores lower.
     """
     xl, xu = bounds(settings.search, n_min, n_max)
     fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
@@ -344,17 +378,42 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     P, fP = run(np.vstack([X, with_grid(best)]))
     top = np.flatnonzero(P[:, 6] == P[:, 6].max())
     anchor = P[top[np.argmin(fP[top])]]
-    starts = valley_starts(fun, anchor)
+    V, fV = run(valley_starts(fun, anchor))
     evals += 28
-    V, fV = run(starts)
     if fV.min() < fP[top].min() - 1e-9:
-        G, fG = run(with_grid(V[np.argmin(fV)]))
-        P, fP = np.vstack([P, V, G]), np.concatenate([fP, fV, fG])
-    else:
-        P, fP = np.vstack([P, V]), np.concatenate([fP, fV])
+        anchor = V[np.argmin(fV)]
+    # Cross-seed: every n also starts from the best pose found with the most points, so that
+    # a basin found late (or only at large n) reaches the whole front.
+    ns_all = np.unique(P[:, 6])
+    Q, fQ = run(np.column_stack([np.tile(anchor[:6], (len(ns_all), 1)), ns_all]))
+    P, fP = np.vstack([P, V, Q]), np.concatenate([fP, fV, fQ])
     Fp = np.column_stack([fP, objective.cost(P)["f2"]])
     Xf, Ff = front_of(P, Fp)
     return Xf, Ff, evals
+
+
+def coarse_seeds(feats: list[FrameFeatures], T_init: np.ndarray, settings: Settings,
+                 cost_model: CostModel, n_max: int) -> np.ndarray:
+    """Seed poses from a rotation grid on a coarse objective (see
+    :mod:`paretocal.search.seeding`), shape (k, 6)."""
+    import dataclasses
+
+    from .features.image import distance_transform
+    from .search.seeding import grid_seeds
+
+    s = settings.search
+    tau = s.seed_truncation_px
+    coarse = []
+    for f in feats:
+        dt = distance_transform(f.image.edges, tau)
+        img = dataclasses.replace(f.image, dt=dt, truncation_px=tau,
+                                  mean_dt=float(dt.mean(dtype=np.float64)))
+        coarse.append(dataclasses.replace(f, image=img))
+    scene = build_scene(coarse, settings.features.z_min, settings.objective.outside)
+    obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
+    poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r_deg, s.bound_t_m,
+                          s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count)
+    return poses
 
 
 def valley_starts(fun, x: np.ndarray, directions: int = 2,

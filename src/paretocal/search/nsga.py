@@ -48,9 +48,10 @@ class SearchResult:
     history: list = field(default_factory=list)
 
 
-def make_algorithm(settings: SearchSettings) -> NSGA2:
-    """NSGA-II with SBX (p, eta), polynomial mutation (eta) and uniform sampling."""
-    sampling = SamplingWithInit() if settings.include_init else FloatRandomSampling()
+def make_algorithm(settings: SearchSettings, seeds: np.ndarray | None = None) -> NSGA2:
+    """NSGA-II with SBX (p, eta), polynomial mutation (eta) and uniform sampling (plus the
+    zero correction and ``seeds`` (k, 6) when ``settings.include_init``)."""
+    sampling = SamplingWithInit(seeds) if settings.include_init else FloatRandomSampling()
     return NSGA2(pop_size=settings.pop, sampling=sampling,
                  crossover=SBX(prob=settings.sbx_prob, eta=settings.sbx_eta),
                  mutation=PM(eta=settings.pm_eta, at_least_once=True),
@@ -84,7 +85,7 @@ def front_of(X: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
-              progress=None) -> SearchResult:
+              progress=None, seeds: np.ndarray | None = None) -> SearchResult:
     """Run NSGA-II for ``settings.gens`` generations.
 
     Parameters
@@ -96,11 +97,13 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
         Range of points per frame.
     progress : callable, optional
         Called as ``progress(generation, total, best_f1)`` after every generation.
+    seeds : ndarray, shape (k, 6), optional
+        Poses placed in the initial population.
     """
     timed = _TimedObjective(objective)
     xl, xu = bounds(settings, n_min, n_max)
     problem = CalibrationProblem(timed, xl, xu)
-    algorithm = make_algorithm(settings)
+    algorithm = make_algorithm(settings, seeds)
     algorithm.setup(problem, termination=("n_gen", settings.gens), seed=settings.seed,
                     verbose=False, save_history=False)
     t0 = time.perf_counter()

@@ -45,19 +45,22 @@ class RoundN(Repair):
 
 
 class SamplingWithInit(Sampling):
-    """Uniform random sampling in the bounds (the paper's), plus the zero correction.
+    """Uniform random sampling in the bounds (the paper's), plus given poses.
 
-    The current extrinsic is a candidate worth keeping: a few individuals start at the zero
-    correction, with ``n`` spread over its range.
+    The current extrinsic (the zero correction) and any seed poses are candidates worth
+    keeping: each starts ``per_seed`` individuals, with ``n`` spread over its range.
     """
 
-    def __init__(self, n_init: int = 8):
+    def __init__(self, seeds: np.ndarray | None = None, per_seed: int = 4):
         super().__init__()
-        self.n_init = n_init
+        zero = np.zeros((1, 6))
+        self.seeds = zero if seeds is None or len(seeds) == 0 else np.vstack([zero, seeds])
+        self.per_seed = per_seed
 
     def _do(self, problem, n_samples, **kwargs):
         X = FloatRandomSampling()._do(problem, n_samples, **kwargs)
-        k = min(self.n_init, n_samples)
-        X[:k, :6] = 0.0
-        X[:k, 6] = np.linspace(problem.xl[6], problem.xu[6], k)
+        ns = np.linspace(problem.xl[6], problem.xu[6], self.per_seed)
+        rows = [np.r_[pose, n] for pose in self.seeds for n in ns][: n_samples // 2]
+        if rows:
+            X[: len(rows)] = np.clip(np.array(rows), problem.xl, problem.xu)
         return X
