@@ -52,7 +52,7 @@ class ObjectiveSettings:
     chamfer: str = "edge-dt"         #: "edge-dt" (default, sound) or "paper" (as written)
     truncation_px: float = 10.0      #: robust cap of the per-point distance (px)
     outside: str = "mean"            #: charge for points out of view: "mean" DT or "truncation"
-    w_edge: float = 1.0              #: w1, weight of the depth-edge term; w2 = 1 - w1 (intensity)
+    w_edge: float = 0.8              #: w1, weight of the depth-edge term; w2 = 1 - w1 (intensity)
     contrast: float = 1.0            #: weight of the smooth-point term subtracted (0 disables)
     ucb_k: float | None = None       #: multiplier of the sampling error; None: sqrt(2 ln evals)
     cost: str = "model"              #: "model" (deterministic) or "psutil" (paper, measured)

@@ -218,7 +218,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
     settings : Settings, optional
     progress : callable, optional
-        ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``.
+        ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``
+        (the polish reports its passes: the first, and the one after re-selecting points).
 
     Returns
     -------
@@ -266,9 +267,14 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
 
     X, F = res.X, res.F
     evaluations = res.evaluations
+    steps = 1 + int(settings.features.reselect)
     if d.refine:
         t0 = time.perf_counter()
+        if progress is not None:
+            progress("polish", 0, steps)
         X, F, ev = polish_front(objective, X, F, settings, n_min, n_max)
+        if progress is not None:
+            progress("polish", 1, steps)
         evaluations += ev
         timings["polish"] = time.perf_counter() - t0
         if settings.features.reselect:
@@ -289,6 +295,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             X, F, ev = polish_front(objective, X, objective.evaluate(X), settings, n_min, n_max)
             evaluations += ev + len(X)
             timings["reselect"] = time.perf_counter() - t0
+            if progress is not None:
+                progress("polish", 2, steps)
 
     T = objective.transforms(X)
     chamfer_parts = objective.chamfer(X)
@@ -342,7 +350,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
 
 
 def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
-                 settings: Settings, n_min: int, n_max: int, grid: int = 12):
+                 settings: Settings, n_min: int, n_max: int, grid: int = 12,
+                 max_front: int = 32):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
@@ -353,7 +362,7 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     Then the weakly determined directions of the best pose are explored: edge alignment
     constrains some combinations poorly (a small pitch against a few centimetres of height
     aligns everything near one depth), and a neighbouring minimum along such a valley can be
-    almost as good. Starts along the two flattest eigen-directions of the Hessian at the
+    almost as good. Starts along the three flattest eigen-directions of the Hessian at the
     largest n are polished, and the best pose at the largest n then seeds every n of the
     front again; each n keeps whichever basin scores lower.
     """
@@ -375,6 +384,9 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
         return np.column_stack([np.tile(pose[:6], (len(ns), 1)), ns])
 
     best = X[np.argmin(F[:, 0])]
+    if len(X) > max_front:
+        # Polish a subset spread evenly along the front by cost: enough to draw the trade-off.
+        X = X[np.unique(np.rint(np.linspace(0, len(X) - 1, max_front)).astype(int))]
     P, fP = run(np.vstack([X, with_grid(best)]))
     top = np.flatnonzero(P[:, 6] == P[:, 6].max())
     anchor = P[top[np.argmin(fP[top])]]
@@ -382,9 +394,10 @@ def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
     evals += 28
     if fV.min() < fP[top].min() - 1e-9:
         anchor = V[np.argmin(fV)]
-    # Cross-seed: every n also starts from the best pose found with the most points, so that
-    # a basin found late (or only at large n) reaches the whole front.
-    ns_all = np.unique(P[:, 6])
+    # Cross-seed: every n of the front also starts from the best pose found with the most
+    # points, so that a basin found late (or only at large n) reaches the whole front.
+    Pf, _ = front_of(P, np.column_stack([fP, objective.cost(P)["f2"]]))
+    ns_all = np.unique(Pf[:, 6])
     Q, fQ = run(np.column_stack([np.tile(anchor[:6], (len(ns_all), 1)), ns_all]))
     P, fP = np.vstack([P, V, Q]), np.concatenate([fP, fV, fQ])
     Fp = np.column_stack([fP, objective.cost(P)["f2"]])
@@ -416,12 +429,12 @@ def coarse_seeds(feats: list[FrameFeatures], T_init: np.ndarray, settings: Setti
     return poses
 
 
-def valley_starts(fun, x: np.ndarray, directions: int = 2,
-                  offsets=(-8.0, -4.0, 4.0, 8.0)) -> np.ndarray:
+def valley_starts(fun, x: np.ndarray, directions: int = 3,
+                  offsets=(-12.0, -8.0, -4.0, 4.0, 8.0, 12.0)) -> np.ndarray:
     """Starts along the flattest Hessian eigen-directions of f1 at ``x`` (7,), shape (k, 7).
 
-    Offsets are in units of the finite-difference steps (1 cm, 0.1 deg), so 8 units moves the
-    pose by up to 8 cm or 0.8 deg along the valley.
+    Offsets are in units of the finite-difference steps (1 cm, 0.1 deg), so 12 units moves
+    the pose by up to 12 cm or 1.2 deg along the valley.
     """
     from .search.polish import DEFAULT_FD_STEP, fd_gradient_hessian
 

@@ -109,7 +109,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
                                             features.view_margin_px)
     xyz, group, uv = lf.xyz[keep], lf.group[keep], uv[keep]
-    weight = point_weights(lf.strength[keep], group, features.edge_weight)
+    weight = point_weights(lf.strength[keep], group, features.edge_weight,
+                           np.linalg.norm(xyz, axis=1))
     gx, gy = features.grid
     cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
     cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
@@ -118,15 +119,33 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
                          lf.n_rings)
 
 
-def point_weights(strength: np.ndarray, group: np.ndarray, rule: str) -> np.ndarray:
-    """Objective weight per point: 1, or for depth edges ``sqrt(jump / 1 m)`` (Levinson and
-    Thrun's edge strength), capped at 3 so that a few far jumps cannot dominate."""
-    from .lidar import DEPTH_EDGE
+RANGE_BINS_M = np.array([5.0, 10.0, 20.0, 40.0])
 
+
+def point_weights(strength: np.ndarray, group: np.ndarray, rule: str,
+                  range_m: np.ndarray | None = None) -> np.ndarray:
+    """Objective weight per point.
+
+    ``none``: 1. ``sqrt_jump``: depth edges weighted by ``sqrt(jump / 1 m)`` (Levinson and
+    Thrun's edge strength), capped at 3. ``depth_balanced``: within each feature group, every
+    occupied range band (< 5, 5-10, 10-20, 20-40, > 40 m) carries the same total weight
+    (capped at 4x a point's share), so that structure at one depth cannot outvote the near
+    and far points that separate rotation from translation.
+    """
     w = np.ones(len(strength))
     if rule == "sqrt_jump":
+        from .lidar import DEPTH_EDGE
+
         d = group == DEPTH_EDGE
         w[d] = np.clip(np.sqrt(np.maximum(strength[d], 0.0)), 0.1, 3.0)
+    elif rule == "depth_balanced":
+        band = np.searchsorted(RANGE_BINS_M, range_m)
+        for g in np.unique(group):
+            sel = group == g
+            counts = np.bincount(band[sel], minlength=len(RANGE_BINS_M) + 1)
+            occupied = int((counts > 0).sum())
+            share = sel.sum() / (occupied * np.maximum(counts, 1))
+            w[sel] = np.clip(share[band[sel]], 0.25, 4.0)
     elif rule != "none":
         raise ValueError(f"unknown edge weighting {rule!r}")
     return w

@@ -24,14 +24,16 @@ def _save(fig, path: Path, dpi: int = 120) -> None:
 
 
 def pareto_figure(result, path: Path) -> None:
-    """Pareto front (Chamfer vs normalised cost) with the chosen solution, and, when the
-    reference is known, the reference error of each solution against its cost."""
+    """The Pareto front (Chamfer vs normalised cost) with the chosen solution; the deviation of
+    each solution from the best-supported one against its cost (what the knee rule reads); and,
+    when the reference is known, each solution's error against it."""
     front = result.front
     F, cols = front.F, front.columns
     has_ref = "ref_rotation_deg" in cols
-    fig, axes = plt.subplots(1, 2 if has_ref else 1, figsize=(12 if has_ref else 6.5, 4.6),
-                             squeeze=False)
-    ax = axes[0, 0]
+    panels = 3 if has_ref else 2
+    fig, axes = plt.subplots(1, panels, figsize=(5.6 * panels, 4.6))
+    i = result.chosen
+    ax = axes[0]
     if result.nsga_front is not None:
         _, Fn = result.nsga_front
         ax.scatter(Fn[:, 0], Fn[:, 1], s=14, marker="x", color="0.6", lw=0.8,
@@ -43,38 +45,52 @@ def pareto_figure(result, path: Path) -> None:
     else:
         ax.scatter(F[:, 0], F[:, 1], s=26, color="tab:blue", edgecolor="k", lw=0.3,
                    label="final front", zorder=3)
-    i = result.chosen
     ax.scatter([F[i, 0]], [F[i, 1]], s=220, marker="*", color="tab:red", edgecolor="k",
                zorder=4, label=f"chosen ({result.decision['rule']}, n = {result.n_points})")
     ax.set_xlabel("f1: Chamfer objective (px, lower is better)")
     ax.set_ylabel("f2: normalised cost (t_norm + m_norm)")
     ax.set_title("Pareto front")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="best")
+
+    ms = cols["ms"]
+    ax = axes[1]
+    dev = cols["deviation_px"]
+    ax.plot(ms, dev + 0.1, "o-", ms=3.5, color="tab:purple", lw=1)
+    ax.scatter([ms[i]], [dev[i] + 0.1], s=220, marker="*", color="tab:red", edgecolor="k",
+               zorder=4, label=f"chosen, {dev[i]:.2f} px")
+    if "max_deviation_px" in result.decision:
+        ax.axhline(result.decision["max_deviation_px"] + 0.1, color="0.4", ls="--", lw=1,
+                   label=f"acceptance, {result.decision['max_deviation_px']:g} px")
+    ax.set_yscale("log")
+    ax.set_xlabel("modelled evaluation time (ms)")
+    ax.set_ylabel("deviation from best-supported solution + 0.1 (px, log)")
+    ax.set_title("Calibration deviation vs cost (knee rule)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="best")
+
     if has_ref:
-        ax2 = axes[0, 1]
-        ms = cols["ms"]
-        ax2.plot(ms, cols["ref_rotation_deg"], "o-", color="tab:blue", ms=4,
+        ax2 = axes[2]
+        ax2.plot(ms, cols["ref_rotation_deg"], "o-", color="tab:blue", ms=3.5, lw=1,
                  label="rotation error (deg)")
         ax2.set_xlabel("modelled evaluation time (ms)")
         ax2.set_ylabel("rotation error (deg)", color="tab:blue")
-        ax2.set_xscale("log")
         ax3 = ax2.twinx()
-        ax3.plot(ms, cols["ref_translation_cm"], "s--", color="tab:orange", ms=4,
+        ax3.plot(ms, cols["ref_translation_cm"], "s--", color="tab:orange", ms=3.5, lw=1,
                  label="translation error (cm)")
         ax3.set_ylabel("translation error (cm)", color="tab:orange")
         ax2.axvline(ms[i], color="tab:red", lw=1, ls=":", label="chosen")
-        ax2.set_title("Error against the dataset's reference, per front solution")
+        ax2.set_title("Error against the dataset's reference")
         ax2.grid(alpha=0.3)
         h1, l1 = ax2.get_legend_handles_labels()
         h2, l2 = ax3.get_legend_handles_labels()
-        ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper right")
+        ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center")
     fig.tight_layout()
     _save(fig, path)
 
 
 def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
-                   z_min: float = 0.1, max_depth: float = 60.0) -> None:
+                   z_min: float = 0.1, max_depth: float = 30.0) -> None:
     """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
     uv, z, vis = project(frame.points, frame.camera, T, z_min)
     rgb = frame.image[:, :, ::-1]

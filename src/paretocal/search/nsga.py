@@ -108,17 +108,18 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
                     verbose=False, save_history=False)
     t0 = time.perf_counter()
     history = []
+    gen = 0
     while algorithm.has_next():
         algorithm.next()
+        gen += 1
         F = algorithm.pop.get("F")
         best = float(F[:, 0].min())
-        history.append({"gen": int(algorithm.n_gen), "best_f1": best,
-                        "evaluations": timed.evaluations})
+        history.append({"gen": gen, "best_f1": best, "evaluations": timed.evaluations})
         if progress is not None:
-            progress(int(algorithm.n_gen), settings.gens, best)
+            progress(gen, settings.gens, best)
     wall = time.perf_counter() - t0
     popX, popF = algorithm.pop.get("X"), algorithm.pop.get("F")
     Xf, Ff = front_of(popX, popF)
     return SearchResult(X=Xf, F=Ff, pop_X=popX, pop_F=popF, evaluations=timed.evaluations,
-                        generations=int(algorithm.n_gen), wall_s=wall,
+                        generations=gen, wall_s=wall,
                         objective_s=timed.seconds, history=history)
