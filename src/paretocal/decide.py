@@ -131,3 +131,49 @@ def choose(F: np.ndarray, ms: np.ndarray, rule: str = "knee",
         return i, {"rule": "budget", "budget_ms": float(budget_ms),
                    "solutions_within_budget": int(len(ok))}
     raise SettingsError(f"unknown decision rule {rule!r}")
+
+
+DEVIATION_FLOOR_PX = 0.1  # deviations below this are equally good for the knee
+
+
+def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "knee",
+           budget_ms: float | None = None, max_deviation_px: float = 1.0) -> tuple[int, dict]:
+    """Choose a solution of the front by ``rule`` (see the module docstring).
+
+    Parameters
+    ----------
+    F : ndarray, shape (k, 2)
+        ``[f1, f2]`` of the front.
+    ms : ndarray, shape (k,)
+        Modelled evaluation time per solution (ms).
+    deviation : ndarray, shape (k,)
+        Pixel deviation of each solution from the best-supported one (lowest f1).
+    rule, budget_ms, max_deviation_px
+        As in :class:`paretocal.config.DecisionSettings`.
+
+    Returns
+    -------
+    index : int
+    decision : dict
+    """
+    from .search.nsga import front_indices
+
+    best = int(np.argmin(F[:, 0]))
+    if rule == "knee":
+        # Deviations span orders of magnitude (tens of px at the cheapest end, hundredths at
+        # the dearest): judge them on a log scale, floored where differences stop mattering.
+        Fd = np.column_stack([np.log10(deviation + DEVIATION_FLOOR_PX), F[:, 1]])
+        candidates = np.sort(front_indices(Fd))
+        # A cheaper solution is acceptable only if its calibration agrees with the
+        # best-supported one: a neighbouring minimum can win on a small sample.
+        agree = deviation[candidates] <= max_deviation_px
+        candidates = candidates[agree | (candidates == best)]
+    else:
+        Fd, candidates = F, np.arange(len(F))
+    j, decision = choose(Fd[candidates], ms[candidates], rule, budget_ms)
+    i = int(candidates[j])
+    decision["deviation_px"] = float(deviation[i])
+    if rule == "knee":
+        decision["figure"] = "log10(deviation_px + 0.1) vs cost"
+        decision["max_deviation_px"] = float(max_deviation_px)
+    return i, decision

@@ -11,24 +11,21 @@ import numpy as np
 
 from . import __version__
 from .config import Settings
-from .decide import choose, reprojection_deviation
+from .decide import decide, reprojection_deviation
 from .errors import DegenerateSceneError, InputError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
-from .geometry import correction_params, pose_error
+from .geometry import pose_error
 from .io.frame import Frame
 from .io.layouts import load_frames
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
-from .search import VARIABLES, bounds, front_of, run_nsga2
-from .search.polish import newton_polish, polish
+from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
 
 log = logging.getLogger(__name__)
 
 MIN_POINTS_PER_FRAME = 30
 DEFAULT_N_MIN = 20
-DEVIATION_FLOOR_PX = 0.1  # deviations below this are equally good for the knee
-FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps after Newton
 
 
 @dataclass
@@ -175,21 +172,30 @@ def _check_scene(feats: list[FrameFeatures]) -> None:
             f"{MIN_POINTS_PER_FRAME} per frame: {', '.join(few[:5])}); check --init and the camera")
 
 
-def _scenes(frames: list[Frame], T_view: np.ndarray, settings: Settings, progress=None):
-    """Features of every frame as seen from ``T_view``, laid out for the evaluators.
+class _Stage:
+    """The objective built from the frames' features as seen from ``T_view``.
 
-    Returns the per-frame features (search part), the search scene and the held-out scene
-    (None without a holdout).
+    Attributes: ``feats`` (search part of each frame's features), ``scene``, ``holdout``
+    (held-out scene or None), ``n_min``, ``n_max``, ``cost`` (the measured cost model) and
+    ``objective`` (corrections relative to ``T_init``).
     """
-    feats_all = prepare_features(frames, T_view, settings, progress)
-    _check_scene(feats_all)
-    o = settings.objective
-    parts = [f.split(o.holdout) for f in feats_all]
-    feats = [p[0] for p in parts]
-    scene = build_scene(feats, settings.features.z_min, o.outside)
-    holdout = (build_scene([p[1] for p in parts], settings.features.z_min, o.outside)
-               if o.holdout > 0 else None)
-    return feats, scene, holdout
+
+    def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
+                 settings: Settings, progress=None):
+        feats_all = prepare_features(frames, T_view, settings, progress)
+        _check_scene(feats_all)
+        o, z_min = settings.objective, settings.features.z_min
+        parts = [f.split(o.holdout) for f in feats_all]
+        self.feats = [p[0] for p in parts]
+        self.scene = build_scene(self.feats, z_min, o.outside)
+        self.holdout = (build_scene([p[1] for p in parts], z_min, o.outside)
+                        if o.holdout > 0 else None)
+        self.n_min, self.n_max = n_range(settings, self.scene.points_per_frame)
+        self.cost = measure_cost_model(self.scene, get_evaluator(o.evaluator), T_view,
+                                       self.n_min, self.n_max)
+        self.objective = CalibrationObjective(self.scene, T_init, o, self.cost,
+                                              [f.image.edge_uv for f in self.feats],
+                                              ucb_k=settings.ucb_k)
 
 
 def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]:
@@ -241,21 +247,15 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
-    feats, scene, holdout_scene = _scenes(frames, T_init, settings, report("features"))
+    stage = _Stage(frames, T_init, T_init, settings, report("features"))
+    feats, scene, objective, cost_model = stage.feats, stage.scene, stage.objective, stage.cost
+    n_min, n_max = stage.n_min, stage.n_max
     timings["features"] = time.perf_counter() - t0
-    n_min, n_max = n_range(settings, scene.points_per_frame)
-
-    t0 = time.perf_counter()
-    cost_model = measure_cost_model(scene, get_evaluator(settings.objective.evaluator), T_init,
-                                    n_min, n_max)
-    timings["cost_model"] = time.perf_counter() - t0
     d = settings.decision
     if d.rule == "budget" and d.budget_ms < float(cost_model.time_ms(cost_model.points_min)):
         raise SettingsError(f"--budget-ms {d.budget_ms:g}: below the cheapest evaluation "
                             f"({float(cost_model.time_ms(cost_model.points_min)):.4g} ms at "
                             f"n = {n_min}); raise the budget or lower --n-min")
-    objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
-                                     [f.image.edge_uv for f in feats], ucb_k=settings.ucb_k)
     seeds = None
     if settings.search.seed_grid_deg:
         t0 = time.perf_counter()
@@ -283,13 +283,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             # objective, and that bias grows with the initial error.
             t0 = time.perf_counter()
             T_est = objective.transforms(X[np.argmin(F[:, 0])][None])[0]
-            feats, scene, holdout_scene = _scenes(frames, T_est, settings)
-            n_min, n_max = n_range(settings, scene.points_per_frame)
-            cost_model = measure_cost_model(scene, get_evaluator(settings.objective.evaluator),
-                                            T_est, n_min, n_max)
-            objective = CalibrationObjective(scene, T_init, settings.objective, cost_model,
-                                             [f.image.edge_uv for f in feats],
-                                             ucb_k=settings.ucb_k)
+            stage = _Stage(frames, T_est, T_init, settings)
+            feats, scene, objective, cost_model = (stage.feats, stage.scene, stage.objective,
+                                                   stage.cost)
+            n_min, n_max = stage.n_min, stage.n_max
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], n_min, n_max)
             X, F, ev = polish_front(objective, X, objective.evaluate(X), settings, n_min, n_max)
@@ -307,37 +304,21 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     for g, name in enumerate(GROUP_NAMES):
         short = {"depth_edge": "edge_px", "intensity_edge": "intensity_px", "smooth": "smooth_px"}
         columns[short[name]] = chamfer_parts["mean"][:, g]
-    if holdout_scene is not None:
-        columns["chamfer_holdout"] = holdout_score(holdout_scene, T_init, settings, X)
+    if stage.holdout is not None:
+        columns["chamfer_holdout"] = holdout_score(stage.holdout, T_init, settings, X)
     # How far each solution's calibration moves projections from the best-supported one.
     best = int(np.argmin(F[:, 0]))
-    check = holdout_scene if holdout_scene is not None else scene
+    check = stage.holdout if stage.holdout is not None else scene
     columns["deviation_px"] = reprojection_deviation(
         T, T[best], [check.frame_xyz(f) for f in range(check.n_frames)],
         [f.camera for f in feats], settings.features.z_min)
     if T_ref is not None:
         for k, v in pose_error(T, T_ref).items():
             columns[f"ref_{k}"] = v
-    if d.rule == "knee":
-        # Deviations span orders of magnitude (tens of px at the cheapest end, hundredths at
-        # the dearest): judge them on a log scale, floored where differences stop mattering.
-        dev = np.log10(columns["deviation_px"] + DEVIATION_FLOOR_PX)
-        Fd = np.column_stack([dev, F[:, 1]])
-        candidates = np.sort(front_indices(Fd))
-        # A cheaper solution is acceptable only if its calibration agrees with the
-        # best-supported one: a neighbouring minimum can win on a small sample.
-        agree = columns["deviation_px"][candidates] <= d.max_deviation_px
-        candidates = candidates[agree | (candidates == best)]
-    else:
-        Fd, candidates = F, np.arange(len(X))
-    j, decision = choose(Fd[candidates], costs["ms"][candidates], d.rule, d.budget_ms)
-    i = int(candidates[j])
+    i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
+                         d.max_deviation_px)
     decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
-                     "deviation_px": float(columns["deviation_px"][i])})
-    if d.rule == "knee":
-        decision["figure"] = "log10(deviation_px + 0.1) vs cost"
-        decision["max_deviation_px"] = float(d.max_deviation_px)
+                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6]))})
     wall = time.perf_counter() - t_start
     timings["total"] = wall
     return CalibrationResult(
@@ -349,123 +330,13 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         nsga_front=(res.X, res.F))
 
 
-def polish_front(objective: CalibrationObjective, X: np.ndarray, F: np.ndarray,
-                 settings: Settings, n_min: int, n_max: int, grid: int = 12,
-                 max_front: int = 32):
-    """Polish every front solution at its own n, plus the best pose at a grid of n values.
-
-    Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
-    the diagonal valleys of the objective; a short compass search then settles each solution.
-    The grid fills parts of the n range the search's front did not reach, so the final front
-    shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
-
-    Then the weakly determined directions of the best pose are explored: edge alignment
-    constrains some combinations poorly (a small pitch against a few centimetres of height
-    aligns everything near one depth), and a neighbouring minimum along such a valley can be
-    almost as good. Starts along the three flattest eigen-directions of the Hessian at the
-    largest n are polished, and the best pose at the largest n then seeds every n of the
-    front again; each n keeps whichever basin scores lower.
-    """
-    xl, xu = bounds(settings.search, n_min, n_max)
-    fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
-    iters = settings.decision.refine_iters
-    evals = 0
-
-    def run(seeds):
-        nonlocal evals
-        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu)
-        Z, f, e2 = polish(fun, Z, step=FINISH_STEP, lower=xl, upper=xu)
-        evals += e1 + e2
-        return Z, f
-
-    ns = np.unique(np.rint(np.geomspace(max(n_min, 1), n_max, grid)))
-
-    def with_grid(pose):
-        return np.column_stack([np.tile(pose[:6], (len(ns), 1)), ns])
-
-    best = X[np.argmin(F[:, 0])]
-    if len(X) > max_front:
-        # Polish a subset spread evenly along the front by cost: enough to draw the trade-off.
-        X = X[np.unique(np.rint(np.linspace(0, len(X) - 1, max_front)).astype(int))]
-    P, fP = run(np.vstack([X, with_grid(best)]))
-    top = np.flatnonzero(P[:, 6] == P[:, 6].max())
-    anchor = P[top[np.argmin(fP[top])]]
-    V, fV = run(valley_starts(fun, anchor))
-    evals += 28
-    if fV.min() < fP[top].min() - 1e-9:
-        anchor = V[np.argmin(fV)]
-    # Cross-seed: every n of the front also starts from the best pose found with the most
-    # points, so that a basin found late (or only at large n) reaches the whole front.
-    Pf, _ = front_of(P, np.column_stack([fP, objective.cost(P)["f2"]]))
-    ns_all = np.unique(Pf[:, 6])
-    Q, fQ = run(np.column_stack([np.tile(anchor[:6], (len(ns_all), 1)), ns_all]))
-    P, fP = np.vstack([P, V, Q]), np.concatenate([fP, fV, fQ])
-    Fp = np.column_stack([fP, objective.cost(P)["f2"]])
-    Xf, Ff = front_of(P, Fp)
-    return Xf, Ff, evals
-
-
-def coarse_seeds(feats: list[FrameFeatures], T_init: np.ndarray, settings: Settings,
-                 cost_model: CostModel, n_max: int) -> np.ndarray:
-    """Seed poses from a rotation grid on a coarse objective (see
-    :mod:`paretocal.search.seeding`), shape (k, 6)."""
-    import dataclasses
-
-    from .features.image import distance_transform
-    from .search.seeding import grid_seeds
-
-    s = settings.search
-    tau = s.seed_truncation_px
-    coarse = []
-    for f in feats:
-        dt = distance_transform(f.image.edges, tau)
-        img = dataclasses.replace(f.image, dt=dt, truncation_px=tau,
-                                  mean_dt=float(dt.mean(dtype=np.float64)))
-        coarse.append(dataclasses.replace(f, image=img))
-    scene = build_scene(coarse, settings.features.z_min, settings.objective.outside)
-    obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
-    poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r_deg, s.bound_t_m,
-                          s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count)
-    return poses
-
-
-def valley_starts(fun, x: np.ndarray, directions: int = 3,
-                  offsets=(-12.0, -8.0, -4.0, 4.0, 8.0, 12.0)) -> np.ndarray:
-    """Starts along the flattest Hessian eigen-directions of f1 at ``x`` (7,), shape (k, 7).
-
-    Offsets are in units of the finite-difference steps (1 cm, 0.1 deg), so 12 units moves
-    the pose by up to 12 cm or 1.2 deg along the valley.
-    """
-    from .search.polish import DEFAULT_FD_STEP, fd_gradient_hessian
-
-    h = DEFAULT_FD_STEP
-    _, _, H = fd_gradient_hessian(fun, x[None], h)
-    w, V = np.linalg.eigh(H[0] * h[:, None] * h[None, :])
-    out = []
-    for d in range(directions):
-        for o in offsets:
-            z = x.copy()
-            z[:6] += o * V[:, d] * h
-            out.append(z)
-    return np.array(out)
-
-
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:
     """Each solution's pose scored on every held-out point (no sampling-error term), shape (k,)."""
-    from .objective.cost import CostModel
-
     dummy = CostModel(0.0, 1.0, 0.0, 1.0, 0, 1, {})
     obj = CalibrationObjective(scene, T_init, settings.objective, dummy, ucb_k=0.0)
     Xa = np.array(X, dtype=np.float64, copy=True)
     Xa[:, 6] = int(scene.points_per_frame.max())
     return obj.chamfer(Xa)["f1"]
-
-
-def front_indices(F: np.ndarray) -> np.ndarray:
-    """Indices of the non-dominated rows of F (k, 2)."""
-    from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
-
-    return np.asarray(NonDominatedSorting().do(F, only_non_dominated_front=True), dtype=np.int64)
 
 
 def _feature_counts(feats: list[FrameFeatures]) -> dict:

@@ -74,9 +74,14 @@ class _TimedObjective:
         return F
 
 
+def front_indices(F: np.ndarray) -> np.ndarray:
+    """Indices of the non-dominated rows of F (k, 2), both objectives minimised."""
+    return np.asarray(NonDominatedSorting().do(F, only_non_dominated_front=True), dtype=np.int64)
+
+
 def front_of(X: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Non-dominated, de-duplicated rows of (X, F), sorted by cost then f1."""
-    nd = NonDominatedSorting().do(F, only_non_dominated_front=True)
+    nd = front_indices(F)
     Xf, Ff = X[nd], F[nd]
     _, uniq = np.unique(np.round(Ff, 12), axis=0, return_index=True)
     Xf, Ff = Xf[uniq], Ff[uniq]

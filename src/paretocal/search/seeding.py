@@ -70,3 +70,27 @@ def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n
         if len(chosen) == keep:
             break
     return P[chosen, :6], fP[chosen]
+
+
+def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) -> np.ndarray:
+    """Seed poses for the search, shape (k, 6): the prepared frames ``feats`` are scored with
+    their distance transforms truncated at ``settings.search.seed_truncation_px`` on a
+    rotation grid (:func:`grid_seeds`)."""
+    import dataclasses
+
+    from ..features.image import distance_transform
+    from ..objective import CalibrationObjective, build_scene
+
+    s = settings.search
+    tau = s.seed_truncation_px
+    coarse = []
+    for f in feats:
+        dt = distance_transform(f.image.edges, tau)
+        img = dataclasses.replace(f.image, dt=dt, truncation_px=tau,
+                                  mean_dt=float(dt.mean(dtype=np.float64)))
+        coarse.append(dataclasses.replace(f, image=img))
+    scene = build_scene(coarse, settings.features.z_min, settings.objective.outside)
+    obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
+    poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r_deg, s.bound_t_m,
+                          s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count)
+    return poses
