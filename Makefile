@@ -15,7 +15,7 @@ $(BIN)/paretocal: pyproject.toml
 
 # A full calibration of the 20 bundled KITTI raw frames from a perturbed initial extrinsic.
 demo: $(BIN)/paretocal
-	$(BIN)/paretocal perturb $(DATA)/kitti_raw/2011_09_26 --rot 5 --trans 0.2 --seed 1 --out $(RUN)/init.yaml
+	$(BIN)/paretocal perturb $(DATA)/kitti_raw/2011_09_26 --rot 5 --trans 0.2 --seed 1000 --out $(RUN)/init.yaml
 	$(BIN)/paretocal calibrate $(DATA)/kitti_raw/2011_09_26 --init $(RUN)/init.yaml --out $(RUN)
 
 test: $(BIN)/paretocal
