@@ -80,6 +80,11 @@ if HAVE_NUMBA:
                 NIN[c, f] = inside
 
 
+def _empty_sums(C: int, F: int):
+    """Zeroed outputs of the evaluators: S1, S2 (C, F, G) float64 and n_in (C, F) int64."""
+    return np.zeros((C, F, N_GROUPS)), np.zeros((C, F, N_GROUPS)), np.zeros((C, F), np.int64)
+
+
 def sums_numba(scene: Scene, A: np.ndarray, n: np.ndarray):
     """Fused kernel. ``A``: (C, F, 3, 4) projections; ``n``: (C,) points per frame.
 
@@ -93,9 +98,7 @@ def sums_numba(scene: Scene, A: np.ndarray, n: np.ndarray):
     if not HAVE_NUMBA:  # pragma: no cover
         raise RuntimeError("numba is not available; use the numpy evaluator")
     C, F = A.shape[:2]
-    S1 = np.zeros((C, F, N_GROUPS))
-    S2 = np.zeros((C, F, N_GROUPS))
-    NIN = np.zeros((C, F), dtype=np.int64)
+    S1, S2, NIN = _empty_sums(C, F)
     _sums_numba(np.ascontiguousarray(A, dtype=np.float64),
                 np.ascontiguousarray(n, dtype=np.int64), scene.x, scene.y, scene.z, scene.weight,
                 scene.group, scene.point_start, scene.dt, scene.dt_start, scene.width,
@@ -108,9 +111,7 @@ def sums_numpy(scene: Scene, A: np.ndarray, n: np.ndarray, chunk_points: int = 4
     A = np.asarray(A, dtype=np.float64)
     n = np.asarray(n, dtype=np.int64)
     C, F = A.shape[:2]
-    S1 = np.zeros((C, F, N_GROUPS))
-    S2 = np.zeros((C, F, N_GROUPS))
-    NIN = np.zeros((C, F), dtype=np.int64)
+    S1, S2, NIN = _empty_sums(C, F)
     for f in range(F):
         a, b = scene.point_start[f], scene.point_start[f + 1]
         m_all = b - a
@@ -158,9 +159,7 @@ def sums_kdtree(scene: Scene, edge_uv: list[np.ndarray], A: np.ndarray, n: np.nd
 
     A = np.asarray(A, dtype=np.float64)
     C, F = A.shape[:2]
-    S1 = np.zeros((C, F, N_GROUPS))
-    S2 = np.zeros((C, F, N_GROUPS))
-    NIN = np.zeros((C, F), dtype=np.int64)
+    S1, S2, NIN = _empty_sums(C, F)
     for f in range(F):
         tree = cKDTree(edge_uv[f])
         a, b = scene.point_start[f], scene.point_start[f + 1]

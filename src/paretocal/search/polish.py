@@ -115,14 +115,16 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
 
 def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters: int = 8,
                   max_step: float = 3.0, lower: np.ndarray | None = None,
-                  upper: np.ndarray | None = None):
+                  upper: np.ndarray | None = None, eig_floor: float = 1e-3):
     """Damped Newton steps with finite-difference derivatives, batched over solutions.
 
     Each iteration costs 28 + 5 evaluations per solution. Directions come from the Hessian with
     its eigenvalues floored (so the step always descends); steps are capped at ``max_step``
     difference steps, and a line search over {1, 1/2, 1/4, 1/8, 1/16} keeps a step only when
     it lowers f1. Unlike a coordinate search, this follows the narrow diagonal valleys that
-    rotation-translation coupling creates.
+    rotation-translation coupling creates. Eigenvalues below ``eig_floor`` times the largest
+    (in units of h) are raised to it: finite differences of a rough objective make the flattest
+    curvatures noise, and a step along them is left to the line search and the trust region.
 
     Returns
     -------
@@ -132,7 +134,7 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
     """
     X = np.array(X, dtype=np.float64, copy=True)
     k = len(X)
-    f = None
+    f = np.full(k, np.inf)
     evals = 0
     alphas = np.array([1.0, 0.5, 0.25, 0.125, 0.0625])
     active = np.ones(k, dtype=bool)
@@ -142,14 +144,12 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
             break
         f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
         evals += 28 * len(idx)
-        if f is None:
-            f = np.full(k, np.inf)
         f[idx] = np.minimum(f[idx], f0)
         # Work in units of h so that metres and degrees are comparable.
         gs = g * h
         Hs = H * h[None, :, None] * h[None, None, :]
         w, V = np.linalg.eigh(Hs)
-        floor = np.maximum(np.abs(w).max(axis=1, keepdims=True) * 1e-3, 1e-9)
+        floor = np.maximum(np.abs(w).max(axis=1, keepdims=True) * eig_floor, 1e-12)
         w = np.maximum(np.abs(w), floor)
         step = -np.einsum("kij,kj->ki", V, np.einsum("kji,kj->ki", V, gs) / w)
         norm = np.linalg.norm(step, axis=1, keepdims=True)
@@ -166,7 +166,7 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
         X[idx[better]] = cand[better, best[better]]
         f[idx[better]] = fbest[better]
         active[idx[~better]] = False
-    if f is None:
+    if not np.all(np.isfinite(f)):            # iters = 0: nothing was evaluated
         f = np.asarray(chamfer(X), dtype=np.float64)
         evals += k
     return X, f, evals
