@@ -130,7 +130,7 @@ class TestCostModel:
         t, m = cm.normalised(pts)
         np.testing.assert_allclose([t[0], m[0], t[-1], m[-1]], [0, 0, 1, 1], atol=1e-12)
         assert np.all(np.diff(cm.time_ms(pts)) > 0) and np.all(np.diff(cm.nbytes(pts)) > 0)
-        assert cm.bytes_fixed >= scene.dt.nbytes
+        assert cm.bytes_fixed >= scene.dtq.nbytes
 
     def test_normalised_cost_does_not_depend_on_the_timing(self, scene_and_feats):
         # Two different measured lines give the same normalised cost: the search stays

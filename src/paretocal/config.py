@@ -66,6 +66,7 @@ class SearchSettings:
 
     pop: int = 300
     gens: int = 120
+    engine: str = "lean"             #: "lean" (arrays + pymoo operators) or "pymoo" (its NSGA2)
     seed: int = 0
     bound_t_m: float = 1.5           #: +- bound of x, y, z (m)
     bound_r_deg: float = 25.0        #: +- bound of yaw, pitch, roll (deg)
@@ -137,6 +138,8 @@ class Settings:
         s, o, f, d = self.search, self.objective, self.features, self.decision
         if s.pop < 4:
             raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
+        if s.engine not in ("lean", "pymoo"):
+            raise SettingsError(f"engine {s.engine!r}: choose 'lean' or 'pymoo'")
         if s.gens < 1:
             raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
         if not s.bound_t_m > 0 or not s.bound_r_deg > 0:

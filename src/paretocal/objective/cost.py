@@ -4,7 +4,8 @@ Default (``model``): a cost model measured once at start-up on this machine. The
 timed on a probe population at several ``n`` (median of repeats) and a line is fitted,
 ``time = a + b * P`` ms per candidate, where ``P`` is the number of points evaluated over all
 frames; the bytes an evaluation reads are counted from the arrays it touches,
-``bytes = DT bytes + 13 * P`` (three float32 coordinates and a group byte per point). Both are
+``bytes = DT bytes + 17 * P`` (three float32 coordinates, a float32 weight and a group byte
+per point). Both are
 min-max normalised over the search's ``n`` range and summed, ``f2 = t_norm + m_norm`` in [0, 2].
 
 Because both parts are affine in ``P``, the normalised cost is the same function of ``n`` on
@@ -26,7 +27,7 @@ import numpy as np
 
 from .scene import Scene
 
-BYTES_PER_POINT = 13  # x, y, z float32 + group int8
+BYTES_PER_POINT = 17  # x, y, z, weight float32 + group int8
 
 
 @dataclass(frozen=True)

@@ -28,55 +28,75 @@ except Exception:  # pragma: no cover - exercised only where numba is broken
 if HAVE_NUMBA:
 
     @njit(parallel=True, cache=True, fastmath=False)
-    def _sums_numba(A, n, x, y, z, weight, group, point_start, dt, dt_start, width, height, outside,
-                    z_min, S1, S2, NIN):  # pragma: no cover - compiled
+    def _sums_numba(A, n, x, y, z, weight, group, point_start, dtq, dt_start, width, height,
+                    outside_q, z_min, S1, S2, NIN):  # pragma: no cover - compiled
+        # Frame-outer loop: all candidates read one frame's DT while it is hot in cache. The DT
+        # is stored as uint16 (0.00015 px steps at a 10 px truncation): half the bytes of
+        # float32, so a 1242 x 375 frame fits a 1 MB L2 cache; bilinear lookups were 55 % of
+        # the time with float32. Costs are accumulated in DT units and scaled by the caller.
         C = A.shape[0]
         F = point_start.shape[0] - 1
-        G = S1.shape[2]
-        # Frame-outer loop: all candidates read one frame's DT while it is hot in cache.
         for f in range(F):
             w = width[f]
             h = height[f]
             umax = w - 1.0
             vmax = h - 1.0
             base = dt_start[f]
-            out = outside[f]
+            out = outside_q[f]
             p0 = point_start[f]
             mf = point_start[f + 1] - p0
             for c in prange(C):
-                acc1 = np.zeros(G)
-                acc2 = np.zeros(G)
                 a00, a01, a02, a03 = A[c, f, 0, 0], A[c, f, 0, 1], A[c, f, 0, 2], A[c, f, 0, 3]
                 a10, a11, a12, a13 = A[c, f, 1, 0], A[c, f, 1, 1], A[c, f, 1, 2], A[c, f, 1, 3]
                 a20, a21, a22, a23 = A[c, f, 2, 0], A[c, f, 2, 1], A[c, f, 2, 2], A[c, f, 2, 3]
-                m = min(n[c], mf)
+                s10 = 0.0
+                s11 = 0.0
+                s12 = 0.0
+                s20 = 0.0
+                s21 = 0.0
+                s22 = 0.0
                 inside = 0
-                for i in range(p0, p0 + m):
+                for i in range(p0, p0 + min(n[c], mf)):
                     X = x[i]
                     Y = y[i]
                     Z = z[i]
                     zc = a20 * X + a21 * Y + a22 * Z + a23
                     d = out
                     if zc > z_min:
-                        u = (a00 * X + a01 * Y + a02 * Z + a03) / zc
-                        v = (a10 * X + a11 * Y + a12 * Z + a13) / zc
+                        iz = 1.0 / zc
+                        u = (a00 * X + a01 * Y + a02 * Z + a03) * iz
+                        v = (a10 * X + a11 * Y + a12 * Z + a13) * iz
                         if u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax:
                             x0 = min(int(u), w - 2)
                             y0 = min(int(v), h - 2)
                             fx = u - x0
                             fy = v - y0
                             k = base + y0 * w + x0
-                            top = dt[k] + fx * (dt[k + 1] - dt[k])
-                            bot = dt[k + w] + fx * (dt[k + w + 1] - dt[k + w])
+                            d00 = np.float64(dtq[k])
+                            d01 = np.float64(dtq[k + 1])
+                            d10 = np.float64(dtq[k + w])
+                            d11 = np.float64(dtq[k + w + 1])
+                            top = d00 + fx * (d01 - d00)
+                            bot = d10 + fx * (d11 - d10)
                             d = top + fy * (bot - top)
                             inside += 1
-                    g = group[i]
                     wd = weight[i] * d
-                    acc1[g] += wd
-                    acc2[g] += wd * d
-                for g in range(G):
-                    S1[c, f, g] = acc1[g]
-                    S2[c, f, g] = acc2[g]
+                    g = group[i]
+                    if g == 0:
+                        s10 += wd
+                        s20 += wd * d
+                    elif g == 1:
+                        s11 += wd
+                        s21 += wd * d
+                    else:
+                        s12 += wd
+                        s22 += wd * d
+                S1[c, f, 0] = s10
+                S1[c, f, 1] = s11
+                S1[c, f, 2] = s12
+                S2[c, f, 0] = s20
+                S2[c, f, 1] = s21
+                S2[c, f, 2] = s22
                 NIN[c, f] = inside
 
 
@@ -99,10 +119,14 @@ def sums_numba(scene: Scene, A: np.ndarray, n: np.ndarray):
         raise RuntimeError("numba is not available; use the numpy evaluator")
     C, F = A.shape[:2]
     S1, S2, NIN = _empty_sums(C, F)
+    q = scene.dt_scale
     _sums_numba(np.ascontiguousarray(A, dtype=np.float64),
                 np.ascontiguousarray(n, dtype=np.int64), scene.x, scene.y, scene.z, scene.weight,
-                scene.group, scene.point_start, scene.dt, scene.dt_start, scene.width,
-                scene.height, scene.outside, np.float64(scene.z_min), S1, S2, NIN)
+                scene.group, scene.point_start, scene.dtq, scene.dt_start, scene.width,
+                scene.height, scene.outside.astype(np.float64) / q, np.float64(scene.z_min),
+                S1, S2, NIN)
+    S1 *= q
+    S2 *= q * q
     return S1, S2, NIN
 
 

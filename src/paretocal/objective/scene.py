@@ -29,8 +29,10 @@ class Scene:
     group : ndarray, shape (M,), int8
     point_start : ndarray, shape (F + 1,), int64
         Frame f owns points ``point_start[f]:point_start[f + 1]``.
-    dt : ndarray, shape (sum H*W,), float32
-        Truncated distance transforms, row-major, frame after frame.
+    dtq : ndarray, shape (sum H*W,), uint16
+        Truncated distance transforms, row-major, frame after frame, in units of ``dt_scale``
+        (truncation / 65535 px): the evaluators read half the bytes of float32.
+    dt_scale : float
     dt_start : ndarray, shape (F,), int64
     width, height : ndarray, shape (F,), int64
     outside : ndarray, shape (F,), float32
@@ -50,7 +52,8 @@ class Scene:
     weight: np.ndarray
     group: np.ndarray
     point_start: np.ndarray
-    dt: np.ndarray
+    dtq: np.ndarray
+    dt_scale: float
     dt_start: np.ndarray
     width: np.ndarray
     height: np.ndarray
@@ -88,9 +91,9 @@ class Scene:
         return np.einsum("fij,cjk->cfik", self.K, np.asarray(T, dtype=np.float64)[:, :3, :])
 
     def frame_dt(self, f: int) -> np.ndarray:
-        """The distance transform of frame f, shape (H, W)."""
+        """The distance transform of frame f as the evaluators see it, float64 (H, W) in px."""
         h, w, s = int(self.height[f]), int(self.width[f]), int(self.dt_start[f])
-        return self.dt[s:s + h * w].reshape(h, w)
+        return self.dtq[s:s + h * w].reshape(h, w) * self.dt_scale
 
     def frame_xyz(self, f: int) -> np.ndarray:
         """Frame f's points, shape (M_f, 3) float32."""
@@ -100,7 +103,7 @@ class Scene:
     @property
     def nbytes_static(self) -> int:
         """Bytes of the arrays every evaluation reads regardless of n (the DTs)."""
-        return int(self.dt.nbytes)
+        return int(self.dtq.nbytes)
 
 
 def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = "mean") -> Scene:
@@ -136,8 +139,9 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
         y=np.ascontiguousarray(xyz[:, 1], dtype=np.float32),
         z=np.ascontiguousarray(xyz[:, 2], dtype=np.float32),
         weight=weight, group=group, point_start=point_start,
-        dt=np.concatenate([f.image.dt.ravel() for f in frames]).astype(np.float32),
-        dt_start=dt_start,
+        dtq=np.rint(np.concatenate([f.image.dt.ravel() for f in frames]).astype(np.float64)
+                    / (trunc / 65535.0)).clip(0, 65535).astype(np.uint16),
+        dt_scale=trunc / 65535.0, dt_start=dt_start,
         width=np.array([f.image.dt.shape[1] for f in frames], dtype=np.int64),
         height=np.array([f.image.dt.shape[0] for f in frames], dtype=np.int64),
         outside=out, K=np.stack([np.asarray(f.camera.K, dtype=np.float64) for f in frames]),

@@ -10,10 +10,12 @@ from pymoo.algorithms.moo.nsga2 import NSGA2
 from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
+from pymoo.operators.selection.tournament import TournamentSelection
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
 from ..config import SearchSettings
-from .problem import CalibrationProblem, RoundN, SamplingWithInit, bounds
+from .lean import LeanNSGA2
+from .problem import CalibrationProblem, RoundN, SamplingWithInit, bounds, place_seeds
 
 
 @dataclass
@@ -48,14 +50,46 @@ class SearchResult:
     history: list = field(default_factory=list)
 
 
+def binary_tournament(pop, P, algorithm, **kwargs):
+    """NSGA-II's binary tournament, vectorised (pymoo's loops over pairs in Python).
+
+    Same rule as pymoo's ``comp_by_dom_and_crowding`` for unconstrained problems: the dominating
+    individual wins; otherwise the larger crowding distance; otherwise a coin toss.
+    """
+    F = pop.get("F")
+    cd = pop.get("crowding")
+    a, b = P[:, 0], P[:, 1]
+    Fa, Fb = F[a], F[b]
+    a_dom = np.all(Fa <= Fb, axis=1) & np.any(Fa < Fb, axis=1)
+    b_dom = np.all(Fb <= Fa, axis=1) & np.any(Fb < Fa, axis=1)
+    coin = algorithm.random_state.random(len(a)) < 0.5
+    by_cd = np.where(cd[a] > cd[b], a, np.where(cd[b] > cd[a], b, np.where(coin, a, b)))
+    S = np.where(a_dom, a, np.where(b_dom, b, by_cd))
+    return S[:, None].astype(int, copy=False)
+
+
+class FastPymooNSGA2(NSGA2):
+    """pymoo's NSGA-II (``engine = "pymoo"``) without work a fixed-generation run does not need.
+
+    The non-dominated optimum is not recomputed after every generation (the front is taken
+    from the final population), and the tournament is vectorised: 51 -> 38 ms per generation
+    at population 1000. The default ``lean`` engine (:mod:`paretocal.search.lean`) runs the
+    same operators on arrays in about 12 ms.
+    """
+
+    def _set_optimum(self, **kwargs):
+        self.opt = self.pop
+
+
 def make_algorithm(settings: SearchSettings, seeds: np.ndarray | None = None) -> NSGA2:
     """NSGA-II with SBX (p, eta), polynomial mutation (eta) and uniform sampling (plus the
     zero correction and ``seeds`` (k, 6) when ``settings.include_init``)."""
     sampling = SamplingWithInit(seeds) if settings.include_init else FloatRandomSampling()
-    return NSGA2(pop_size=settings.pop, sampling=sampling,
-                 crossover=SBX(prob=settings.sbx_prob, eta=settings.sbx_eta),
-                 mutation=PM(eta=settings.pm_eta, at_least_once=True),
-                 repair=RoundN(), eliminate_duplicates=settings.eliminate_duplicates)
+    return FastPymooNSGA2(pop_size=settings.pop, sampling=sampling,
+                          selection=TournamentSelection(func_comp=binary_tournament),
+                          crossover=SBX(prob=settings.sbx_prob, eta=settings.sbx_eta),
+                          mutation=PM(eta=settings.pm_eta, at_least_once=True),
+                          repair=RoundN(), eliminate_duplicates=settings.eliminate_duplicates)
 
 
 class _TimedObjective:
@@ -107,24 +141,50 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
     """
     timed = _TimedObjective(objective)
     xl, xu = bounds(settings, n_min, n_max)
-    problem = CalibrationProblem(timed, xl, xu)
-    algorithm = make_algorithm(settings, seeds)
-    algorithm.setup(problem, termination=("n_gen", settings.gens), seed=settings.seed,
-                    verbose=False, save_history=False)
-    t0 = time.perf_counter()
     history = []
-    gen = 0
-    while algorithm.has_next():
-        algorithm.next()
-        gen += 1
-        F = algorithm.pop.get("F")
+
+    def record(gen, F):
         best = float(F[:, 0].min())
         history.append({"gen": gen, "best_f1": best, "evaluations": timed.evaluations})
         if progress is not None:
             progress(gen, settings.gens, best)
+
+    t0 = time.perf_counter()
+    if settings.engine == "lean":
+        engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, _round_n(xl, xu),
+                           settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
+        rng = np.random.default_rng(settings.seed)
+        X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
+        if settings.include_init:
+            X0 = place_seeds(X0, xl, xu, np.vstack([np.zeros((1, 6))] + (
+                [seeds] if seeds is not None and len(seeds) else [])))
+        state = engine.start(X0, settings.seed)
+        record(1, state.F)
+        while state.generation < settings.gens:
+            state = engine.step(state)
+            record(state.generation, state.F)
+        popX, popF, gen = state.X, state.F, state.generation
+    else:
+        problem = CalibrationProblem(timed, xl, xu)
+        algorithm = make_algorithm(settings, seeds)
+        algorithm.setup(problem, termination=("n_gen", settings.gens), seed=settings.seed,
+                        verbose=False, save_history=False)
+        gen = 0
+        while algorithm.has_next():
+            algorithm.next()
+            gen += 1
+            record(gen, algorithm.pop.get("F"))
+        popX, popF = algorithm.pop.get("X"), algorithm.pop.get("F")
     wall = time.perf_counter() - t0
-    popX, popF = algorithm.pop.get("X"), algorithm.pop.get("F")
     Xf, Ff = front_of(popX, popF)
     return SearchResult(X=Xf, F=Ff, pop_X=popX, pop_F=popF, evaluations=timed.evaluations,
                         generations=gen, wall_s=wall,
                         objective_s=timed.seconds, history=history)
+
+
+def _round_n(xl: np.ndarray, xu: np.ndarray):
+    """The array form of :class:`RoundN`."""
+    def repair(X):
+        X[:, 6] = np.clip(np.rint(X[:, 6]), xl[6], xu[6])
+        return X
+    return repair

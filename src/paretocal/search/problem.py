@@ -59,8 +59,15 @@ class SamplingWithInit(Sampling):
 
     def _do(self, problem, n_samples, **kwargs):
         X = FloatRandomSampling()._do(problem, n_samples, **kwargs)
-        ns = np.linspace(problem.xl[6], problem.xu[6], self.per_seed)
-        rows = [np.r_[pose, n] for pose in self.seeds for n in ns][: n_samples // 2]
-        if rows:
-            X[: len(rows)] = np.clip(np.array(rows), problem.xl, problem.xu)
-        return X
+        return place_seeds(X, problem.xl, problem.xu, self.seeds, self.per_seed)
+
+
+def place_seeds(X: np.ndarray, xl: np.ndarray, xu: np.ndarray, seeds: np.ndarray,
+                per_seed: int = 4) -> np.ndarray:
+    """Overwrite the first rows of a sampled population (C, 7) with the poses ``seeds`` (k, 6),
+    each at ``per_seed`` values of n spread over its range (at most half the population)."""
+    ns = np.linspace(xl[6], xu[6], per_seed)
+    rows = [np.r_[pose, n] for pose in seeds for n in ns][: len(X) // 2]
+    if rows:
+        X[: len(rows)] = np.clip(np.array(rows), xl, xu)
+    return X
