@@ -10,6 +10,7 @@ import pytest
 import yaml
 
 from paretocal.cli import main
+from paretocal.geometry import pose_error
 from paretocal.io import read_extrinsic
 
 from .helpers import write_generic
@@ -32,7 +33,8 @@ def init_file(tmp_path_factory, raw_date):
 
 
 class TestCalibrate:
-    def test_end_to_end_writes_the_run_directory(self, tmp_path, raw_date, init_file, capsys):
+    def test_end_to_end_writes_the_run_directory(self, tmp_path, raw_date, raw_frames, init_file,
+                                                 capsys):
         out = tmp_path / "run"
         code, stdout, err = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
                                  "--pop", "16", "--gens", "3", "--frames", "0:2", "--seed", "1")
@@ -44,7 +46,13 @@ class TestCalibrate:
         doc = json.loads((out / "result.json").read_text())
         assert doc["seed"] == 1 and doc["config"]["search"]["pop"] == 16
         assert doc["frames"] == ["0000000000", "0000000001"]
-        assert doc["reference_error"]["rotation_deg"] < 10
+        # The reported errors are those of the written extrinsics against KITTI's reference.
+        ref = raw_frames[0].T_ref
+        e0 = pose_error(read_extrinsic(init_file), ref)
+        assert doc["initial_error"]["rotation_deg"] == pytest.approx(float(e0["rotation_deg"]))
+        e1 = pose_error(np.array(doc["T_cam_lidar"]), ref)
+        assert doc["reference_error"]["translation_cm"] == pytest.approx(
+            float(e1["translation_cm"]))
         T = read_extrinsic(out / "extrinsic.yaml")
         np.testing.assert_allclose(T, doc["T_cam_lidar"], atol=1e-8)
         rows = (out / "pareto.csv").read_text().splitlines()
