@@ -58,7 +58,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                    max_range_m: float = 70.0, max_gap_deg: float = 1.0,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
                    along_fraction: float = 0.5, cross_fraction: float = 0.5,
-                   rng: np.random.Generator | int | None = 0) -> LidarFeatures:
+                   rng: np.random.Generator | int | None = 0,
+                   ring: np.ndarray | None = None) -> LidarFeatures:
     """Extract feature points from one sweep.
 
     Parameters
@@ -90,6 +91,9 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         near ray, 0.5 = midway), along a ring and across rings.
     rng : numpy Generator or seed
         Drives the subsampling of smooth points.
+    ring : ndarray, shape (N,), optional
+        Ring index per point, when already known (for example recovered from the whole sweep
+        before cropping it); recovered with ``ring_method`` otherwise.
 
     Returns
     -------
@@ -99,8 +103,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     pts = np.asarray(points, dtype=np.float64)
     xyz_all = pts[:, :3]
     rng_all = np.linalg.norm(xyz_all, axis=1)
-    ring = recover_rings(pts, ring_method)
-    n_rings = int(ring.max()) + 1
+    ring = recover_rings(pts, ring_method) if ring is None else np.asarray(ring)
+    n_rings = int(ring.max()) + 1 if len(ring) else 0
     keep = (rng_all > min_range_m) & (rng_all < max_range_m)
     xyz, refl, r, ring = xyz_all[keep], pts[keep, 3], rng_all[keep], ring[keep]
     psi = azimuth(xyz)
@@ -142,24 +146,34 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
             near = np.hypot(xyz[:, 0], xyz[:, 1]) < 30.0
             z_ground = np.percentile(xyz[near, 2], 5) if near.any() else xyz[:, 2].min()
             on_ground = xyz[:, 2] < z_ground + ground_tol_m
-        # Rank rings by elevation so that "above" and "below" are geometric neighbours.
+        # Rank rings by elevation so that "above" and "below" are geometric neighbours; points
+        # are sorted by (ring, azimuth), so each ring is one contiguous, azimuth-sorted segment.
         el = elevation_deg(xyz)
-        ids = np.unique(ring)
-        med = np.array([np.median(el[ring == k]) for k in ids])
-        by_el = ids[np.argsort(-med)]
-        seg = {k: np.flatnonzero(ring == k) for k in ids}
-        for a, b in zip(by_el[:-1], by_el[1:]):
-            for near, other in ((seg[a], seg[b]), (seg[b], seg[a])):
-                j, dpsi = _nearest_azimuth(psi[near], psi[other])
-                cand = other[j]
-                thr = np.maximum(cross_jump_m, cross_jump_rel * r[near])
-                cj = r[cand] - r[near]
-                hit = (dpsi < gap) & (cj > thr) & ~is_edge[near] & ~(on_ground[near]
-                                                                     & on_ground[cand])
-                idx = near[hit]
-                edge_pos[idx] = _between_rays(xyz[idx], xyz[cand[hit]], r[idx], cross_fraction)
-                strength[idx] = cj[hit]
-                is_edge[idx] = True
+        ids, seg_start = np.unique(ring, return_index=True)
+        seg_end = np.r_[seg_start[1:], n]
+        med = np.array([np.median(el[a:b]) for a, b in zip(seg_start, seg_end)])
+        by_el = np.argsort(-med)                       # segment indices, top ring first
+        pos_of = np.empty(len(ids), dtype=np.int64)
+        pos_of[by_el] = np.arange(len(ids))
+        seg_of = np.repeat(np.arange(len(ids)), seg_end - seg_start)
+        key = seg_of * 8.0 + psi                       # ascending (psi < 2 pi < 8)
+        best_jump = np.zeros(n)
+        best_far = np.full(n, -1)
+        for step in (-1, 1):                           # the ring above, then the ring below
+            tgt_pos = pos_of[seg_of] + step
+            ok = (tgt_pos >= 0) & (tgt_pos < len(ids))
+            tgt = by_el[np.clip(tgt_pos, 0, len(ids) - 1)]
+            cand, dpsi = _nearest_in_segment(key, psi, tgt, seg_start[tgt], seg_end[tgt])
+            thr = np.maximum(cross_jump_m, cross_jump_rel * r)
+            cj = r[cand] - r
+            hit = (ok & (dpsi < gap) & (cj > thr) & ~is_edge & ~(on_ground & on_ground[cand])
+                   & (cj > best_jump))
+            best_jump[hit] = cj[hit]
+            best_far[hit] = cand[hit]
+        idx = np.flatnonzero(best_far >= 0)
+        edge_pos[idx] = _between_rays(xyz[idx], xyz[best_far[idx]], r[idx], cross_fraction)
+        strength[idx] = best_jump[idx]
+        is_edge[idx] = True
 
     # Reflectance edges on one surface (no depth jump): each neighbour pair once.
     same_surface = ok_n & (np.abs(r[nxt] - r) < np.maximum(0.2, 0.03 * r))
@@ -182,14 +196,19 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     return LidarFeatures(out_xyz, group, strength, n_rings)
 
 
-def _nearest_azimuth(psi_q: np.ndarray, psi_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each query azimuth, the index of the nearest azimuth in ``psi_ref`` (sorted,
-    circular) and the angular distance."""
-    m = len(psi_ref)
-    pos = np.searchsorted(psi_ref, psi_q)
-    hi = pos % m
-    lo = (pos - 1) % m
-    d_hi = np.abs(np.mod(psi_ref[hi] - psi_q + np.pi, 2 * np.pi) - np.pi)
-    d_lo = np.abs(np.mod(psi_ref[lo] - psi_q + np.pi, 2 * np.pi) - np.pi)
+def _nearest_in_segment(key: np.ndarray, psi: np.ndarray, tgt: np.ndarray, start: np.ndarray,
+                        end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point, the index of the azimuth-nearest point of segment ``tgt`` (circular).
+
+    ``key = segment * 8 + psi`` is ascending over all points; ``start``/``end`` bound each
+    point's target segment. Returns the indices and the angular distances (radians).
+    """
+    pos = np.searchsorted(key, tgt * 8.0 + psi)
+    hi = np.where(pos < end, pos, start)               # wrap past the ring's last return
+    lo = np.where(pos - 1 >= start, pos - 1, end - 1)  # wrap before its first
+    hi = np.clip(hi, 0, len(psi) - 1)
+    lo = np.clip(lo, 0, len(psi) - 1)
+    d_hi = np.abs(np.mod(psi[hi] - psi + np.pi, 2 * np.pi) - np.pi)
+    d_lo = np.abs(np.mod(psi[lo] - psi + np.pi, 2 * np.pi) - np.pi)
     take_lo = d_lo < d_hi
     return np.where(take_lo, lo, hi), np.where(take_lo, d_lo, d_hi)

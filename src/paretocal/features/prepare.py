@@ -18,6 +18,9 @@ from ..config import FeatureSettings, ObjectiveSettings
 from ..io.frame import Frame
 from .image import ImageFeatures, image_features
 from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
+from .rings import recover_rings
+
+CROP_EXTRA_PX = 150.0
 
 
 @dataclass(eq=False)
@@ -95,8 +98,16 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     """
     img = image_features(frame.image, features.blur_sigma, features.canny_low,
                          features.canny_high, objective.truncation_px, features.min_edge_px)
+    # Rings come from the whole sweep (its scan order); edges are then found only in the part
+    # of the sweep near the view, a quarter of the points (a wider margin than the view's, so
+    # that no neighbour of a kept point is lost).
+    ring = recover_rings(frame.points, features.ring_method)
+    uv, z, _ = project(frame.points, frame.camera, T_init, features.z_min)
+    near = (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
+                                           features.view_margin_px + CROP_EXTRA_PX)
     lf: LidarFeatures = lidar_features(
-        frame.points, depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
+        frame.points[near], ring=ring[near],
+        depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
         cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
         ground_tol_m=features.ground_tol_m,
         intensity_jump=features.intensity_jump, min_range_m=features.min_range_m,

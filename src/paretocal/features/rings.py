@@ -98,8 +98,8 @@ def _looks_like_rings(points: np.ndarray, ring: np.ndarray) -> bool:
     if n > MAX_RINGS or n < 2:
         return False
     psi = azimuth(points)
-    span = np.zeros(n)
-    np.maximum.at(span, ring, psi)
-    lo = np.full(n, 2 * np.pi)
-    np.minimum.at(lo, ring, psi)
-    return np.median(span - lo) > np.pi
+    order = np.argsort(ring, kind="stable")
+    r, p = ring[order], psi[order]
+    starts = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
+    span = np.maximum.reduceat(p, starts) - np.minimum.reduceat(p, starts)
+    return np.median(span) > np.pi

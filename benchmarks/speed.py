@@ -1,0 +1,260 @@
+"""Speed and memory of paretocal on the bundled KITTI frames, side by side in one run.
+
+    .venv/bin/python benchmarks/speed.py [--quick] [--png runs/speed_scaling.png]
+
+Prints:
+1. evaluations and projected points per second of the paper-style evaluator (the paper's
+   Chamfer with a KD-tree built per evaluation, timed with psutil over 3 repetitions, as the
+   paper describes), the numpy batched evaluator and the fused numba kernel, at the same n, and
+   their ratios;
+2. wall time and peak RSS of a paper-scale NSGA-II search (population 1000 x 200 generations)
+   on 1 and 5 frames, split into objective time and optimiser overhead, each in a fresh process,
+   and of the full calibration (search, seeds and polish) at that scale;
+3. how the fused evaluation time grows with n, population size and frame count (a table and a
+   log-log PNG);
+4. the feature extraction time per frame (edges, distance transform, rings, LiDAR edges).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(os.environ.get("PARETOCAL_DATA",
+                           Path(__file__).resolve().parents[2] / "shared" / "data"))
+DRIVE = DATA / "kitti_raw" / "2011_09_26"
+
+
+def _scene(frames, settings):
+    from paretocal.objective import build_scene
+    from paretocal.pipeline import prepare_features
+
+    feats = prepare_features(frames, frames[0].T_ref, settings)
+    return build_scene(feats, settings.features.z_min, settings.objective.outside), feats
+
+
+def _population(T, C, n, rng):
+    from paretocal.geometry import apply_correction
+
+    X = np.zeros((C, 7))
+    X[:, :3] = rng.uniform(-0.05, 0.05, (C, 3))
+    X[:, 3:6] = rng.uniform(-0.5, 0.5, (C, 3))
+    X[:, 6] = n
+    return apply_correction(T, X), X
+
+
+def _best_of(fn, repeats):
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def evaluators(frames, settings, n=1000, quick=False):
+    """Section 1: paper-style vs numpy vs fused, one frame, n points per evaluation."""
+    from paretocal.objective import paper_chamfer, sums_numba, sums_numpy
+    from paretocal.objective.cost import measure_per_candidate
+
+    scene, feats = _scene(frames[:1], settings)
+    n = min(n, int(scene.points_per_frame.max()))
+    rng = np.random.default_rng(0)
+    T, _ = _population(frames[0].T_ref, 1000, n, rng)
+    A = scene.projections(T)
+    nn = np.full(len(A), n)
+    edge_uv = [f.image.edge_uv for f in feats]
+
+    k = 10 if quick else 40
+    t0 = time.perf_counter()
+    measure_per_candidate(lambda i: paper_chamfer(scene, edge_uv, A[i:i + 1], nn[i:i + 1]), k,
+                          repeats=3)
+    paper_eps = k / (time.perf_counter() - t0)
+    numpy_eps = len(A) / _best_of(lambda: sums_numpy(scene, A, nn), 1 if quick else 3)
+    numba_eps = len(A) / _best_of(lambda: sums_numba(scene, A, nn), 3 if quick else 10)
+    rows = [("paper-style (KD-tree per evaluation, psutil, 3 reps)", paper_eps),
+            ("numpy, batched over the population", numpy_eps),
+            ("fused numba kernel", numba_eps)]
+    print(f"\n1. Evaluators, 1 frame, n = {n} points per evaluation "
+          f"({len(edge_uv[0])} image edge pixels)")
+    print(f"   {'evaluator':<52} {'evals/s':>12} {'points/s':>12} {'vs paper':>9}")
+    for name, eps in rows:
+        print(f"   {name:<52} {eps:12,.0f} {eps * n:12.3g} {eps / paper_eps:9.0f}x")
+    print(f"   fused / numpy = {numba_eps / numpy_eps:.1f}x")
+    return {"n": n, "paper_eps": paper_eps, "numpy_eps": numpy_eps, "numba_eps": numba_eps}
+
+
+def _child(case: str, frames_spec: str) -> dict:
+    """One measured run in this process (called in a fresh subprocess)."""
+    from paretocal import Settings, calibrate, load_frames
+    from paretocal.geometry import correction_matrix
+    from paretocal.objective import CalibrationObjective, measure_cost_model, sums_numba
+    from paretocal.pipeline import n_range
+    from paretocal.search import run_nsga2
+
+    frames = load_frames(DRIVE, frames_spec)
+    settings = Settings().replace(search={"pop": 1000, "gens": 200, "seed": 0})
+    T_init = frames[0].T_ref @ correction_matrix([0.1, -0.1, 0.1, 2.0, -2.0, 1.0])
+    t0 = time.perf_counter()
+    if case == "search":
+        scene, _ = _scene(frames, settings)
+        lo, hi = n_range(settings, scene.points_per_frame)
+        cm = measure_cost_model(scene, sums_numba, T_init, lo, hi)
+        obj = CalibrationObjective(scene, T_init, settings.objective, cm, ucb_k=settings.ucb_k)
+        r = run_nsga2(obj, settings.search, lo, hi)
+        out = {"wall_s": r.wall_s, "objective_s": r.objective_s,
+               "overhead_s": r.wall_s - r.objective_s, "evaluations": r.evaluations,
+               "points": int(scene.points_per_frame.sum())}
+    else:
+        r = calibrate(frames, T_init, settings)
+        out = {"wall_s": r.wall_s, "timings": {k: round(v, 2) for k, v in r.timings.items()},
+               "evaluations": r.evaluations,
+               "error": [r.reference_error["rotation_deg"], r.reference_error["translation_cm"]]}
+    out["total_s"] = time.perf_counter() - t0
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return out
+
+
+def paper_scale(quick=False):
+    """Section 2: paper-scale runs, each in a fresh process for an honest peak RSS."""
+    cases = [("search", "0"), ("search", "0:5")] + ([] if quick else [("calibrate", "0"),
+                                                                     ("calibrate", "0:5")])
+    print("\n2. Paper-scale runs (population 1000 x 200 generations), fresh process each")
+    print(f"   {'run':<28} {'wall s':>8} {'objective s':>12} {'overhead s':>11} {'peak RSS MB':>12}")
+    results = {}
+    for case, spec in cases:
+        p = subprocess.run([sys.executable, __file__, "--child", case, "--frames", spec],
+                           capture_output=True, text=True, check=True)
+        r = json.loads(p.stdout.strip().splitlines()[-1])
+        results[f"{case} {spec}"] = r
+        nf = len(range(*slice(*map(int, spec.split(":"))).indices(20))) if ":" in spec else 1
+        label = f"{'NSGA-II search' if case == 'search' else 'full calibrate'}, {nf} frame(s)"
+        if case == "search":
+            print(f"   {label:<28} {r['wall_s']:8.1f} {r['objective_s']:12.1f} "
+                  f"{r['overhead_s']:11.1f} {r['peak_rss_mb']:12.0f}")
+        else:
+            t = r["timings"]
+            print(f"   {label:<28} {r['wall_s']:8.1f} {t.get('search_objective', 0):12.1f} "
+                  f"{r['wall_s'] - t.get('search_objective', 0):11.1f} {r['peak_rss_mb']:12.0f}"
+                  f"   (stages: {', '.join(f'{k} {v}' for k, v in t.items() if k != 'total')})")
+    return results
+
+
+def scaling(frames, settings, png=None, quick=False):
+    """Section 3: fused evaluation time against n, population and frames."""
+    from paretocal.objective import sums_numba
+
+    rng = np.random.default_rng(1)
+    rep = 2 if quick else 5
+    out = {"n": [], "pop": [], "frames": []}
+    scene1, _ = _scene(frames[:1], settings)
+    nmax = int(scene1.points_per_frame.max())
+    for n in [n for n in (125, 250, 500, 1000, 2000) if n <= nmax]:
+        T, _ = _population(frames[0].T_ref, 1000, n, rng)
+        A = scene1.projections(T)
+        out["n"].append((n, _best_of(lambda: sums_numba(scene1, A, np.full(1000, n)), rep)))
+    for C in (125, 250, 500, 1000, 2000, 4000):
+        T, _ = _population(frames[0].T_ref, C, 1000, rng)
+        A = scene1.projections(T)
+        out["pop"].append((C, _best_of(lambda: sums_numba(scene1, A, np.full(C, 1000)), rep)))
+    for nf in (1, 2, 5, 10, 20):
+        sc, _ = _scene(frames[:nf], settings)
+        T, _ = _population(frames[0].T_ref, 1000, 1000, rng)
+        A = sc.projections(T)
+        out["frames"].append((nf, _best_of(lambda: sums_numba(sc, A, np.full(1000, 1000)), rep)))
+    print("\n3. Fused evaluation of a whole population (1 frame, pop 1000, n 1000 unless varied)")
+    for key, label in (("n", "points per frame n"), ("pop", "population"),
+                       ("frames", "frames")):
+        xs = np.array([x for x, _ in out[key]], float)
+        ts = np.array([t for _, t in out[key]])
+        slope = np.polyfit(np.log(xs), np.log(ts), 1)[0]
+        cells = "  ".join(f"{int(x)}: {t * 1e3:.1f} ms" for x, t in out[key])
+        print(f"   {label:<20} {cells}   (log-log slope {slope:.2f})")
+    if png:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+        for ax, (key, label) in zip(axes, (("n", "points per frame n"), ("pop", "population"),
+                                           ("frames", "frames"))):
+            xs = np.array([x for x, _ in out[key]], float)
+            ts = np.array([t for _, t in out[key]]) * 1e3
+            ax.loglog(xs, ts, "o-", label="measured")
+            ax.loglog(xs, ts[0] * xs / xs[0], ":", color="0.5", label="linear")
+            ax.set_xlabel(label)
+            ax.set_ylabel("fused evaluation time (ms)")
+            ax.grid(alpha=0.3, which="both")
+            ax.legend(fontsize=8)
+        fig.suptitle("paretocal fused kernel scaling on KITTI frames (2 cores)", fontsize=10)
+        fig.tight_layout()
+        Path(png).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(png, dpi=110)
+        print(f"   wrote {png}")
+    return out
+
+
+def features(frames, settings):
+    """Section 4: feature extraction per frame."""
+    from paretocal.features import image_features, lidar_features, prepare_frame
+    from paretocal.features.rings import recover_rings
+
+    f = frames[0]
+    s = settings
+    parts = {
+        "edges + distance transform": lambda: image_features(f.image),
+        "rings": lambda: recover_rings(f.points),
+        "LiDAR edges (incl. rings)": lambda: lidar_features(f.points),
+        "whole frame (prepare_frame)": lambda: prepare_frame(
+            f, f.T_ref, s.features, s.objective, np.random.default_rng(0)),
+    }
+    print(f"\n4. Feature extraction, one frame ({len(f.points)} points, "
+          f"{f.image.shape[1]}x{f.image.shape[0]} image)")
+    out = {}
+    for name, fn in parts.items():
+        out[name] = _best_of(fn, 5)
+        print(f"   {name:<30} {out[name] * 1e3:7.1f} ms")
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer repetitions, no full runs")
+    ap.add_argument("--png", default=None, help="write the scaling plot here")
+    ap.add_argument("--json", default=None, help="write all figures here")
+    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--frames", default="0", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        print(json.dumps(_child(args.child, args.frames)))
+        return 0
+
+    from paretocal import Settings, load_frames
+
+    settings = Settings()
+    frames = load_frames(DRIVE)
+    import numba
+
+    print(f"paretocal speed benchmark: {os.cpu_count()} CPUs, numba threads "
+          f"{numba.get_num_threads()}, data {DRIVE}")
+    res = {"evaluators": evaluators(frames, settings, quick=args.quick),
+           "paper_scale": paper_scale(quick=args.quick),
+           "scaling": scaling(frames, settings, args.png, quick=args.quick),
+           "features": features(frames, settings)}
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
