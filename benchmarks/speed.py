@@ -161,16 +161,18 @@ def scaling(frames, settings, png=None, quick=False):
     for n in [n for n in (125, 250, 500, 1000, 2000) if n <= nmax]:
         T, _ = _population(frames[0].T_ref, 1000, n, rng)
         A = scene1.projections(T)
-        out["n"].append((n, _best_of(lambda: sums_numba(scene1, A, np.full(1000, n)), rep)))
+        out["n"].append((n, _best_of(lambda A=A, n=n: sums_numba(scene1, A, np.full(1000, n)), rep)))
     for C in (125, 250, 500, 1000, 2000, 4000):
         T, _ = _population(frames[0].T_ref, C, 1000, rng)
         A = scene1.projections(T)
-        out["pop"].append((C, _best_of(lambda: sums_numba(scene1, A, np.full(C, 1000)), rep)))
+        out["pop"].append((C, _best_of(lambda A=A, C=C: sums_numba(scene1, A, np.full(C, 1000)),
+                                        rep)))
     for nf in (1, 2, 5, 10, 20):
         sc, _ = _scene(frames[:nf], settings)
         T, _ = _population(frames[0].T_ref, 1000, 1000, rng)
         A = sc.projections(T)
-        out["frames"].append((nf, _best_of(lambda: sums_numba(sc, A, np.full(1000, 1000)), rep)))
+        out["frames"].append((nf, _best_of(lambda sc=sc, A=A: sums_numba(sc, A, np.full(1000, 1000)),
+                                           rep)))
     print("\n3. Fused evaluation of a whole population (1 frame, pop 1000, n 1000 unless varied)")
     for key, label in (("n", "points per frame n"), ("pop", "population"),
                        ("frames", "frames")):
