@@ -23,3 +23,6 @@ test: $(BIN)/paretocal
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
+
+bench: $(BIN)/paretocal
+	PARETOCAL_DATA=$(DATA) $(BIN)/python benchmarks/speed.py --png runs/speed_scaling.png

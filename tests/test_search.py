@@ -91,3 +91,42 @@ class TestNSGA2:
         assert a.evaluations == 40 * 15 and a.generations == 15
         assert np.all(a.X[:, 6] == np.round(a.X[:, 6]))          # n is an integer
         assert a.X[:, 6].max() > 5 * a.X[:, 6].min()              # the front spans n
+
+
+class TestEngines:
+    """The array engine and pymoo's algorithm object run the same NSGA-II."""
+
+    def _run(self, engine, seed=3):
+        s = SearchSettings(pop=60, gens=25, seed=seed, bound_t_m=3, bound_r_deg=3,
+                           engine=engine)
+        return run_nsga2(TestNSGA2.Toy(), s, 10, 1000)
+
+    def test_both_converge_to_the_same_front(self):
+        from pymoo.indicators.hv import HV
+
+        ref = np.array([10.0, 1100.0])
+        hv = {e: HV(ref_point=ref)(self._run(e).F) for e in ("lean", "pymoo")}
+        best = HV(ref_point=ref)(np.column_stack([5.0 / np.sqrt(np.arange(10, 1001)),
+                                                  np.arange(10, 1001)]))
+        for e, v in hv.items():
+            assert v > 0.9 * best, (e, v, best)
+        assert abs(hv["lean"] - hv["pymoo"]) < 0.05 * best
+
+    def test_pymoo_engine_is_deterministic(self):
+        np.testing.assert_array_equal(self._run("pymoo").F, self._run("pymoo").F)
+
+    def test_seeds_enter_the_initial_population(self):
+        class Recorder(TestNSGA2.Toy):
+            first = None
+
+            def evaluate(self, X):
+                if Recorder.first is None:
+                    Recorder.first = X.copy()
+                return super().evaluate(X)
+
+        seeds = np.array([[0.1, 0.2, 0.3, 1.0, 2.0, -1.0]])
+        s = SearchSettings(pop=40, gens=1, seed=0)
+        run_nsga2(Recorder(), s, 10, 1000, seeds=seeds)
+        X0 = Recorder.first
+        assert np.any(np.all(X0[:, :6] == 0.0, axis=1))             # the zero correction
+        assert np.any(np.all(np.isclose(X0[:, :6], seeds[0]), axis=1))
