@@ -42,13 +42,14 @@ class TestEvaluators:
         X = _population(T, int(scene.points_per_frame.max()), rng, C=8)
         A = scene.projections(apply_correction(T, X))
         n = X[:, 6].astype(np.int64)
-        S1, _, nin = sums_numba(scene, A, n)
         K1, _, kin = sums_kdtree(scene, [f.image.edge_uv for f in feats], A, n)
-        np.testing.assert_array_equal(nin, kin)
-        # Bilinear interpolation of the exact EDT vs the exact distance at the same point:
-        # the mean per-point difference is a small fraction of a pixel.
-        per_point = np.abs(S1 - K1).sum() / np.maximum(scene.points_used(n), 1).sum()
-        assert per_point < 0.1
+        for evaluator in (sums_numba, sums_numpy):
+            S1, _, nin = evaluator(scene, A, n)
+            np.testing.assert_array_equal(nin, kin)
+            # Bilinear interpolation of the exact EDT vs the exact distance at the same point:
+            # the mean per-point difference is a small fraction of a pixel.
+            per_point = np.abs(S1 - K1).sum() / np.maximum(scene.points_used(n), 1).sum()
+            assert per_point < 0.1
 
     def test_out_of_view_points_cost_the_outside_charge(self, scene_and_feats):
         scene, feats, T = scene_and_feats
