@@ -150,3 +150,24 @@ class TestBadInput:
         cfg.write_text("search: {popsize: 3}\n")
         self._bad(capsys, "calibrate", raw_date, "--out", tmp_path / "o", "--config", cfg,
                   expect="popsize")
+
+
+class TestCheck:
+    def test_report_on_two_frames(self, tmp_path, raw_date, capsys):
+        from paretocal.io import detect_source, write_extrinsic
+
+        ref = tmp_path / "ref.yaml"
+        write_extrinsic(ref, detect_source(raw_date).frames[0].T_ref)
+        out = tmp_path / "check.json"
+        code, stdout, err = _run(capsys, "check", raw_date, "--extrinsic", ref, "--frames", "0:2",
+                                 "--out", out)
+        assert code == 0, err
+        assert "CALIBRATED" in stdout or "MISCALIBRATED" in stdout
+        doc = json.loads(out.read_text())
+        assert doc["verdict"] in ("calibrated", "miscalibrated")
+        assert set(doc["quality"]["jackknife_se"]) == {"x", "y", "z", "yaw", "pitch", "roll"}
+        assert doc["frames"] == ["0000000000", "0000000001"]
+
+    def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
+        code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")
+        assert code == 2 and "none.yaml: file not found" in err

@@ -199,6 +199,44 @@ def perturb(
                "from the reference)")
 
 
+@app.command()
+def check(
+    source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
+    extrinsic: Annotated[Path, typer.Option(help="Extrinsic to check (YAML/JSON with "
+                                                 "T_cam_lidar).")],
+    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
+    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+    out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
+    rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
+    trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
+    config: Annotated[Optional[Path], typer.Option(help="Settings file.")] = None,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Say whether EXTRINSIC is calibrated for SOURCE, without ground truth."""
+    import json
+
+    from .check import check_extrinsic
+    from .config import load_settings
+    from .io import load_frames, read_extrinsic
+    from .io.atomic import atomic_write_text
+
+    _setup_logging(verbose, quiet)
+    if rot_tol <= 0 or trans_tol <= 0:
+        raise SettingsError("--rot-tol and --trans-tol must be positive")
+    settings = load_settings(config)
+    T = read_extrinsic(extrinsic)
+    loaded = load_frames(source, frames, camera)
+    r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol)
+    if out is not None:
+        atomic_write_text(out, json.dumps(r, indent=2) + "\n")
+    m = r["moved"]
+    typer.echo(f"paretocal: {r['verdict'].upper()} (score {r['score']:.2f}; the local optimum is "
+               f"{m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / {m['pixels']:.1f} px "
+               f"away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+               f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status."""
     args = sys.argv[1:] if argv is None else list(argv)

@@ -18,6 +18,7 @@ from .features.prepare import FrameFeatures, prepare_frame
 from .geometry import pose_error
 from .io.frame import Frame
 from .io.layouts import load_frames
+from .quality import quality_report
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
@@ -71,6 +72,7 @@ class CalibrationResult:
     n_range: tuple[int, int]
     history: list = field(default_factory=list)
     nsga_front: tuple | None = None
+    quality: dict | None = None
 
     @property
     def correction(self) -> dict[str, float]:
@@ -127,6 +129,7 @@ class CalibrationResult:
             "cost_model": self.cost_model.to_dict(),
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
+            "quality": self.quality,
         }
 
 
@@ -319,6 +322,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                          d.max_deviation_px)
     decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
                      "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6]))})
+    quality = quality_report(objective, X[i])
     wall = time.perf_counter() - t_start
     timings["total"] = wall
     return CalibrationResult(
@@ -327,7 +331,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         cost_model=cost_model, settings=settings, evaluations=evaluations, wall_s=wall,
         timings=timings, frames=[f.name for f in frames],
         feature_counts=_feature_counts(feats), n_range=(n_min, n_max), history=res.history,
-        nsga_front=(res.X, res.F))
+        nsga_front=(res.X, res.F), quality=quality)
 
 
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:

@@ -55,7 +55,8 @@ def combine(S1: np.ndarray, S2: np.ndarray, W1: np.ndarray, W2: np.ndarray,
 
     Returns
     -------
-    dict with ``f1`` (C,), ``mean`` (C, G) group means over frames in px, ``se`` (C,)
+    dict with ``f1`` (C,), ``mean`` (C, G) group means over frames in px, ``se`` (C,) and
+    ``per_frame`` (C, F), each frame's weighted term (no sampling-error charge)
     """
     has = W1 > 0
     safe = np.where(has, W1, 1.0)
@@ -71,4 +72,4 @@ def combine(S1: np.ndarray, S2: np.ndarray, W1: np.ndarray, W2: np.ndarray,
            * weights**2)[..., active].sum(axis=(1, 2)) / F**2
     se = np.sqrt(se2)
     f1 = term.mean(axis=1) + ucb_k * se
-    return {"f1": f1, "mean": mean.mean(axis=1), "se": se}
+    return {"f1": f1, "mean": mean.mean(axis=1), "se": se, "per_frame": term}

@@ -1,0 +1,177 @@
+"""How much to trust a calibration without ground truth.
+
+Everything here comes from one batched evaluation of the objective on a finite-difference stencil
+around the extrinsic (28 candidates), read frame by frame:
+
+* **curvature per degree of freedom**: the Hessian of the objective (px per cm^2 or deg^2); the
+  displacement along each axis that raises the objective by 0.01 px; and the flattest direction,
+  the combination of axes the scene constrains least.
+* **agreement across frames**: a Newton step from the extrinsic on each leave-one-frame-out
+  objective gives F nearly independent estimates of the optimum; their jackknife spread is the
+  standard error of each axis (deg, cm), and each frame's own step says which frames disagree.
+* **miscalibration check** (after Levinson & Thrun, RSS 2013): a correct extrinsic is a local
+  minimum of the objective, so few of its grid neighbours score better; and the local optimum
+  found from it lies within a pixel or two of it. The verdict uses the pixel displacement of the
+  local optimum, which is comparable across scenes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import Camera
+from .geometry import correction_matrix
+from .search.polish import DEFAULT_FD_STEP, _fd_stencil
+
+AXES = ("x", "y", "z", "yaw", "pitch", "roll")
+UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
+TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for display
+
+
+def _derivatives(values: np.ndarray, h: np.ndarray):
+    """Gradient (6,) and Hessian (6, 6) from the 28 stencil values of :func:`_fd_stencil`."""
+    f0, fp, fm, fpp = values[0], values[1:7], values[7:13], values[13:]
+    g = (fp - fm) / (2 * h)
+    H = np.zeros((6, 6))
+    k = 0
+    for i in range(6):
+        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h[i] ** 2
+        for j in range(i + 1, 6):
+            H[i, j] = H[j, i] = (fpp[k] - fp[i] - fp[j] + f0) / (h[i] * h[j])
+            k += 1
+    return g, H
+
+
+def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float = 10.0):
+    """Step to the minimum of the local quadratic, in units of h with |eigenvalues| floored."""
+    Hs = H * h[:, None] * h[None, :]
+    w, V = np.linalg.eigh(Hs)
+    w = np.maximum(np.abs(w), np.abs(w).max() * 1e-3 + 1e-12)
+    step = -(V @ ((V.T @ (g * h)) / w))
+    norm = np.linalg.norm(step)
+    if norm > max_units:
+        step *= max_units / norm
+    return step * h
+
+
+def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> dict:
+    """Curvature, identifiability and frame agreement of the extrinsic ``x``.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        Evaluated with its sampling-error charge off (the plain mean over all points).
+    x : ndarray, shape (7,)
+        The solution ``[x, y, z, yaw, pitch, roll, n]``; evaluated with every point.
+    h : ndarray, shape (6,)
+        Finite-difference steps (m, deg).
+
+    Returns
+    -------
+    dict, ready for JSON: ``curvature`` per axis, ``tolerance_0p01`` per axis, ``flattest``
+    direction, ``jackknife_se`` per axis, ``frame_steps`` (each frame's Newton step), and
+    ``well_observed`` per axis.
+    """
+    x = np.array(x, dtype=np.float64, copy=True)
+    x[6] = int(objective.scene.points_per_frame.max())
+    S = _fd_stencil(h)
+    cand = np.tile(x, (len(S), 1))
+    cand[:, :6] += S
+    saved = objective.ucb_k
+    objective.ucb_k = 0.0
+    try:
+        per_frame = objective.chamfer(cand)["per_frame"]              # (28, F)
+    finally:
+        objective.ucb_k = saved
+    F = per_frame.shape[1]
+    g, H = _derivatives(per_frame.mean(axis=1), h)
+    curv = np.diag(H)
+    tol = np.sqrt(2 * 0.01 / np.maximum(curv, 1e-12))
+    w, V = np.linalg.eigh(H * h[:, None] * h[None, :])
+    flat = V[:, 0] * h
+    flat /= np.abs(flat / np.r_[[0.01] * 3, [0.1] * 3]).max()         # largest part 1 cm / 0.1 deg
+    steps = np.array([_newton_step(*_derivatives(per_frame[:, f], h), h) for f in range(F)])
+    if F > 1:
+        loo = []
+        for f in range(F):
+            keep = np.arange(F) != f
+            loo.append(_newton_step(*_derivatives(per_frame[:, keep].mean(axis=1), h), h))
+        loo = np.array(loo)
+        se = np.sqrt((F - 1) / F * ((loo - loo.mean(axis=0)) ** 2).sum(axis=0))
+    else:
+        se = np.full(6, np.nan)
+    full_step = _newton_step(g, H, h)
+
+    def per_axis(v):
+        return {a: float(val) for a, val in zip(AXES, v * TO_REPORT)}
+
+    return {
+        "units": dict(zip(AXES, UNITS)),
+        "frames": int(F),
+        "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)
+                                   for i, (a, c) in enumerate(zip(AXES, curv))},
+        "tolerance_0p01px": per_axis(tol),
+        "flattest_direction": per_axis(flat),
+        "flattest_eigenvalue_ratio": float(w[0] / max(w[-1], 1e-12)),
+        "jackknife_se": per_axis(se),
+        "step_to_local_optimum": per_axis(full_step),
+        "frame_steps": [per_axis(s) for s in steps],
+        "well_observed": {a: bool(np.isfinite(v) and v < (3.0 if u == "cm" else 0.2))
+                          for a, v, u in zip(AXES, se * TO_REPORT, UNITS)},
+    }
+
+
+def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[float, float]:
+    """Levinson & Thrun's test: the share of the 3^6 - 1 grid neighbours of ``x`` (steps
+    ``delta``, m and deg) that score lower than ``x`` itself, and the best improvement (px)."""
+    grid = np.stack(np.meshgrid(*[[-1.0, 0.0, 1.0]] * 6, indexing="ij"), -1).reshape(-1, 6)
+    grid = grid[np.any(grid != 0, axis=1)]
+    cand = np.tile(x, (len(grid) + 1, 1))
+    cand[1:, :6] += grid * delta
+    saved = objective.ucb_k
+    objective.ucb_k = 0.0
+    try:
+        f = objective.chamfer(cand)["f1"]
+    finally:
+        objective.ucb_k = saved
+    better = f[1:] < f[0]
+    return float(better.mean()), float(max(0.0, f[0] - f[1:].min()))
+
+
+def local_optimum(objective, x: np.ndarray, iters: int = 15):
+    """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,)."""
+    from .search.polish import newton_polish, polish
+
+    x = np.array(x, dtype=np.float64, copy=True)
+    x[6] = int(objective.scene.points_per_frame.max())
+    saved = objective.ucb_k
+    objective.ucb_k = 0.0
+    try:
+        fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
+        Z, _, _ = newton_polish(fun, x[None], iters=iters)
+        Z, _, _ = polish(fun, Z, step=np.array([0.005] * 3 + [0.05] * 3))
+    finally:
+        objective.ucb_k = saved
+    return Z[0]
+
+
+def displacement_px(objective, x: np.ndarray, y: np.ndarray) -> float:
+    """Mean pixel distance between the feature points' projections under poses x and y."""
+    from .decide import reprojection_deviation
+
+    sc = objective.scene
+    T = objective.transforms(np.vstack([x, y]))
+    cams = [Camera(sc.K[f], int(sc.width[f]), int(sc.height[f])) for f in range(sc.n_frames)]
+    return float(reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in
+                                                      range(sc.n_frames)], cams, sc.z_min)[0])
+
+
+def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
+    """The correction D with ``T_to = T_from @ D``, as (x, y, z, yaw, pitch, roll)."""
+    from .geometry import correction_params, invert
+
+    return correction_params(invert(T_from) @ T_to)
+
+
+__all__ = ["AXES", "correction_between", "correction_matrix", "displacement_px",
+           "local_optimum", "neighbour_fraction", "quality_report"]

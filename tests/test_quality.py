@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+
+from paretocal.quality import TO_REPORT, neighbour_fraction, quality_report
+
+
+class QuadraticFrames:
+    """A stand-in objective: frame f is a quadratic bowl with its minimum at m_f."""
+
+    def __init__(self, minima, H):
+        self.m = np.asarray(minima, float)              # (F, 6)
+        self.H = H
+        self.ucb_k = 0.0
+        self.scene = type("S", (), {"points_per_frame": np.array([100])})()
+
+    def chamfer(self, X):
+        d = X[:, None, :6] - self.m[None]               # (C, F, 6)
+        per = np.einsum("cfi,ij,cfj->cf", d, self.H, d)
+        return {"f1": per.mean(axis=1), "per_frame": per}
+
+
+@pytest.fixture
+def bowls(rng):
+    h = np.array([0.01] * 3 + [0.1] * 3)
+    H = np.diag(1.0 / h**2) * np.array([1.0, 2.0, 0.5, 3.0, 1.0, 0.2])
+    minima = rng.normal(scale=[0.01, 0.01, 0.01, 0.05, 0.05, 0.05], size=(12, 6))
+    return QuadraticFrames(minima, H)
+
+
+def test_jackknife_is_the_standard_error_of_the_frame_minima(bowls):
+    x = np.r_[bowls.m.mean(axis=0), 100.0]
+    q = quality_report(bowls, x)
+    expect = bowls.m.std(axis=0, ddof=1) / np.sqrt(len(bowls.m)) * TO_REPORT
+    got = np.array([q["jackknife_se"][a] for a in ("x", "y", "z", "yaw", "pitch", "roll")])
+    np.testing.assert_allclose(got, expect, rtol=1e-6)
+    # Each frame's own step lands on its own minimum.
+    step0 = np.array(list(q["frame_steps"][0].values())) / TO_REPORT
+    np.testing.assert_allclose(x[:6] + step0, bowls.m[0], atol=1e-9)
+
+
+def test_curvature_and_flattest_direction(bowls):
+    x = np.r_[bowls.m.mean(axis=0), 100.0]
+    q = quality_report(bowls, x)
+    # The least curved axis in units of the steps is roll (weight 0.2); the direction is
+    # scaled so that its largest part is one step (1 cm or 0.1 deg).
+    flat = q["flattest_direction"]
+    assert abs(flat["roll"]) == pytest.approx(0.1) and abs(flat["x"]) < 1e-6   # 0.1 deg
+    # Curvature reported per cm^2 / deg^2: the 2 H_ii of the mean bowl.
+    assert q["curvature_px_per_unit2"]["x"] == pytest.approx(2 * bowls.H[0, 0] / 100**2)
+
+
+def test_neighbour_fraction_at_and_away_from_the_minimum(bowls):
+    centre = np.r_[bowls.m.mean(axis=0), 100.0]
+    step = np.array([0.05] * 3 + [0.5] * 3)
+    frac0, gain0 = neighbour_fraction(bowls, centre, step)
+    assert frac0 == 0.0 and gain0 == 0.0
+    off = centre.copy()
+    off[3] += 1.0                                        # 1 deg of yaw away
+    frac1, gain1 = neighbour_fraction(bowls, off, step)
+    assert frac1 > 0.2 and gain1 > 0
+
+
+@pytest.mark.slow
+class TestCheckOnKitti:
+    """`check` passes KITTI's reference and flags 1 deg or 10 cm (all 20 sample frames)."""
+
+    @pytest.mark.parametrize("perturbation, verdict", [
+        ([0, 0, 0, 0, 0, 0], "calibrated"),
+        ([0, 0, 0, 0, 0, 1.0], "miscalibrated"),      # 1 deg of roll: the weakest rotation
+        ([0.10, 0, 0, 0, 0, 0], "miscalibrated"),     # 10 cm forward: the weakest translation
+    ])
+    def test_verdict(self, raw_frames, perturbation, verdict):
+        from paretocal.check import check_extrinsic
+        from paretocal.geometry import correction_matrix
+
+        T = raw_frames[0].T_ref @ correction_matrix(perturbation)
+        r = check_extrinsic(raw_frames, T)
+        assert r["verdict"] == verdict, r["moved"]
