@@ -1,9 +1,11 @@
 """Accuracy from random decalibrations of the sample KITTI drive, through the public CLI.
 
-Each trial draws a seeded correction, uniform per axis in +-ROT deg and +-TRANS m, applies it to
-KITTI's reference extrinsic, and writes a *blind copy* of the dataset whose calibration file holds
-the perturbed extrinsic (symbolic links to the frames, rewritten calib_velo_to_cam.txt), so the
-tool cannot see the reference. It then runs
+Each trial draws a seeded correction, uniform per axis in +-ROT deg and +-TRANS m, and starts
+from the extrinsic that this correction brings back to KITTI's reference (so the correction to
+find lies in the box, inside the search bounds for the paper's +-20 deg / +-1.5 m). It writes
+a *blind copy* of the dataset whose calibration file holds the perturbed extrinsic (symbolic
+links to the frames, rewritten calib_velo_to_cam.txt), so the tool cannot see the reference,
+and runs
 
     paretocal calibrate COPY --init INIT.yaml --out RUN --quiet [--frames ...] [--config ...]
 
@@ -70,7 +72,7 @@ def blind_copy(date: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) 
 def run_trial(k: int, args, T_ref: np.ndarray, work: Path) -> dict:
     rng = np.random.default_rng(1000 + k)
     p = np.r_[rng.uniform(-args.trans, args.trans, 3), rng.uniform(-args.rot, args.rot, 3)]
-    T_init = T_ref @ correction_matrix(p)
+    T_init = T_ref @ invert(correction_matrix(p))
     t0 = time.perf_counter()
     if args.api:
         from paretocal import calibrate, load_frames

@@ -177,8 +177,13 @@ def perturb(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
 ) -> None:
-    """Write the dataset's extrinsic with a random correction, uniform per axis, as an --init file."""
-    from .geometry import correction_matrix, pose_error
+    """Write a decalibrated copy of the dataset's extrinsic as an --init file.
+
+    A correction is drawn uniform per axis in +-ROT deg and +-TRANS m; the file holds the
+    extrinsic that this correction brings back to the dataset's (T_init = T_ref @ D^-1), so the
+    correction to find lies in the box.
+    """
+    from .geometry import correction_matrix, invert, pose_error
     from .io import detect_source, write_extrinsic
 
     if rot < 0 or trans < 0:
@@ -189,11 +194,12 @@ def perturb(
         raise ParetocalError(f"{source}: the dataset has no extrinsic to perturb")
     rng = np.random.default_rng(seed)
     p = np.concatenate([rng.uniform(-trans, trans, 3), rng.uniform(-rot, rot, 3)])
-    T = T_ref @ correction_matrix(p)
+    T = T_ref @ invert(correction_matrix(p))
     e = pose_error(T, T_ref)
     write_extrinsic(out, T, comment=(
-        f"{source} extrinsic perturbed (seed {seed}): x y z = {p[0]:+.3f} {p[1]:+.3f} "
-        f"{p[2]:+.3f} m, yaw pitch roll = {p[3]:+.2f} {p[4]:+.2f} {p[5]:+.2f} deg\n"
+        f"{source} extrinsic decalibrated (seed {seed}); the correction back is x y z = "
+        f"{p[0]:+.3f} {p[1]:+.3f} {p[2]:+.3f} m, yaw pitch roll = {p[3]:+.2f} {p[4]:+.2f} "
+        f"{p[5]:+.2f} deg\n"
         f"error vs reference: {e['rotation_deg']:.3f} deg, {e['translation_cm']:.2f} cm"))
     typer.echo(f"paretocal: wrote {out} ({_fmt_err({k: float(v) for k, v in e.items()})} "
                "from the reference)")

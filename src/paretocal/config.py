@@ -81,6 +81,7 @@ class SearchSettings:
     seed_truncation_px: float = 30.0  #: coarse objective's DT truncation for the grid
     seed_points: int = 200           #: points per frame for the grid
     seed_count: int = 8              #: grid poses placed in the initial population
+    seed_grid_t_m: float | None = None  #: joint rotation x translation grid step (m); off
 
 
 @dataclass(frozen=True)

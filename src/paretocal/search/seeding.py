@@ -15,6 +15,8 @@ import numpy as np
 
 from .polish import newton_polish
 
+JOINT_FRAMES = 6  # frames scoring the joint rotation x translation grid
+
 
 def rotation_grid(bound_deg: float, step_deg: float) -> np.ndarray:
     """All (yaw, pitch, roll) on a regular grid within +-bound, shape (G, 3), degrees."""
@@ -24,8 +26,17 @@ def rotation_grid(bound_deg: float, step_deg: float) -> np.ndarray:
     return g
 
 
+def translation_grid(bound_m: float, step_m: float) -> np.ndarray:
+    """All (x, y, z) on a regular grid within +-bound, shape (G, 3), metres."""
+    k = int(np.floor(bound_m / step_m + 1e-9))
+    axis = np.arange(-k, k + 1) * step_m
+    return np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n: int,
-               keep: int, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+               keep: int, chunk: int = 4096, step_t_m: float | None = None,
+               joint_step_deg: float = 5.0, joint_n: int = 30,
+               joint_chamfer=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``keep`` best poses from a rotation grid, polished on the same objective.
 
     Parameters
@@ -40,6 +51,12 @@ def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n
         Points per frame for the coarse evaluation.
     keep : int
         Number of seeds returned.
+    step_t_m : float, optional
+        When given (wide translation bounds), a joint grid of rotations (``joint_step_deg``)
+        and translations (``step_t_m``) is scored too, on ``joint_n`` points per frame: a
+        translation error of a metre shifts the image by several degrees, and rotations scored
+        at zero translation alone then point the wrong way. ``joint_chamfer`` (default
+        ``chamfer``) scores that grid, for example on a few of the frames.
 
     Returns
     -------
@@ -55,6 +72,20 @@ def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n
     # Keep distinct local winners: the best of each 3x3x3 neighbourhood is enough, so take a
     # generous shortlist and let the polish merge neighbours.
     short = np.argsort(f)[: max(4 * keep, keep)]
+    if step_t_m:
+        rj = rotation_grid(bound_r_deg, joint_step_deg)
+        tj = translation_grid(bound_t_m, step_t_m)
+        J = np.zeros((len(rj) * len(tj), 7))
+        J[:, :3] = np.repeat(tj, len(rj), axis=0)
+        J[:, 3:6] = np.tile(rj, (len(tj), 1))
+        J[:, 6] = min(joint_n, n)
+        jc = joint_chamfer or chamfer
+        fj = np.concatenate([jc(J[i:i + 4 * chunk]) for i in range(0, len(J), 4 * chunk)])
+        best_j = J[np.argsort(fj)[: 4 * keep]]
+        best_j[:, 6] = n
+        X = np.vstack([X[short], best_j])
+        f = np.concatenate([f[short], chamfer(best_j)])
+        short = np.argsort(f)[: 6 * keep]
     lo = np.r_[[-bound_t_m] * 3, [-bound_r_deg] * 3, n]
     hi = np.r_[[bound_t_m] * 3, [bound_r_deg] * 3, n]
     P, fP, _ = newton_polish(chamfer, X[short], iters=8, lower=lo, upper=hi,
@@ -89,8 +120,18 @@ def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) ->
         img = dataclasses.replace(f.image, dt=dt, truncation_px=tau,
                                   mean_dt=float(dt.mean(dtype=np.float64)))
         coarse.append(dataclasses.replace(f, image=img))
-    scene = build_scene(coarse, settings.features.z_min, settings.objective.outside)
+    z_min, outside = settings.features.z_min, settings.objective.outside
+    scene = build_scene(coarse, z_min, outside)
     obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
+    step_t = s.seed_grid_t_m if s.seed_grid_t_m and s.bound_t_m > s.seed_grid_t_m else None
+    joint = None
+    if step_t and len(coarse) > JOINT_FRAMES:
+        # The joint grid is large: score it on a few frames spread over the sequence.
+        pick = np.unique(np.linspace(0, len(coarse) - 1, JOINT_FRAMES).round().astype(int))
+        few = build_scene([coarse[i] for i in pick], z_min, outside)
+        jobj = CalibrationObjective(few, T_init, settings.objective, cost_model, ucb_k=0.0)
+        joint = lambda Z: jobj.chamfer(Z)["f1"]  # noqa: E731
     poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r_deg, s.bound_t_m,
-                          s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count)
+                          s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count,
+                          step_t_m=step_t, joint_chamfer=joint)
     return poses
