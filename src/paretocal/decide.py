@@ -28,16 +28,16 @@ import numpy as np
 from .errors import SettingsError
 
 
-def knee_index(F: np.ndarray) -> int:
-    """Index of the knee of a two-objective front F (k, 2), both minimised.
+def chord_distance(F: np.ndarray) -> np.ndarray:
+    """Distance of each solution of a two-objective front F (k, 2) below its chord.
 
-    Returns the solution of largest perpendicular distance below the chord between the
-    extreme solutions in normalised objective space; with fewer than three solutions, or a
-    front with no point below its chord, the lowest-f1 solution.
+    The chord joins the two extreme solutions in objectives min-max normalised over the
+    front; distances are positive on the side of the ideal point, shape (k,). All zeros for a
+    front of fewer than three solutions or a degenerate chord.
     """
     F = np.asarray(F, dtype=np.float64)
     if len(F) < 3:
-        return int(np.argmin(F[:, 0]))
+        return np.zeros(len(F))
     lo, hi = F.min(axis=0), F.max(axis=0)
     Z = (F - lo) / np.where(hi > lo, hi - lo, 1.0)
     a = Z[np.argmin(Z[:, 0])]            # best accuracy end
@@ -45,13 +45,30 @@ def knee_index(F: np.ndarray) -> int:
     d = b - a
     norm = np.hypot(*d)
     if norm == 0:
-        return int(np.argmin(F[:, 0]))
-    # Signed distance; positive on the side of the ideal point (0, 0).
+        return np.zeros(len(F))
     dist = ((Z[:, 0] - a[0]) * d[1] - (Z[:, 1] - a[1]) * d[0]) / norm
     ideal_side = np.sign((0 - a[0]) * d[1] - (0 - a[1]) * d[0]) or 1.0
-    dist *= ideal_side
-    i = int(np.argmax(dist))
-    return i if dist[i] > 0 else int(np.argmin(F[:, 0]))
+    return dist * ideal_side
+
+
+def knee_index(F: np.ndarray) -> int:
+    """Index of the knee of a two-objective front F (k, 2), both minimised.
+
+    Returns the solution of largest perpendicular distance below the chord between the
+    extreme solutions in normalised objective space (:func:`chord_distance`); with fewer than
+    three solutions, or a front with no point below its chord, the lowest-f1 solution.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    dist = chord_distance(F)
+    i = int(np.argmax(dist)) if len(F) else 0
+    return i if len(F) >= 3 and dist[i] > 0 else int(np.argmin(F[:, 0]))
+
+
+def knee_region(F: np.ndarray, share: float = 0.5) -> np.ndarray:
+    """Indices of the solutions at least ``share`` of the knee's distance below the chord."""
+    dist = chord_distance(F)
+    top = dist.max() if len(dist) else 0.0
+    return np.flatnonzero(dist >= share * top) if top > 0 else np.array([], dtype=int)
 
 
 def reprojection_deviation(T: np.ndarray, T_best: np.ndarray, points: list[np.ndarray],
@@ -136,6 +153,27 @@ def choose(F: np.ndarray, ms: np.ndarray, rule: str = "knee",
 DEVIATION_FLOOR_PX = 0.1  # deviations below this are equally good for the knee
 
 
+def knee_candidates(F: np.ndarray, deviation: np.ndarray,
+                    max_deviation_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The solutions the ``knee`` rule chooses among, and the figure it reads.
+
+    Returns the sorted indices of the solutions non-dominated in
+    ``Fd = [log10(deviation + 0.1), f2]`` whose deviation is within ``max_deviation_px`` (the
+    best-supported solution always included), and ``Fd`` itself, shape (k, 2).
+    """
+    from .search.nsga import front_indices
+
+    best = int(np.argmin(F[:, 0]))
+    # Deviations span orders of magnitude (tens of px at the cheapest end, hundredths at the
+    # dearest): judge them on a log scale, floored where differences stop mattering.
+    Fd = np.column_stack([np.log10(deviation + DEVIATION_FLOOR_PX), F[:, 1]])
+    candidates = np.sort(front_indices(Fd))
+    # A cheaper solution is acceptable only if its calibration agrees with the best-supported
+    # one: a neighbouring minimum can win on a small sample.
+    agree = deviation[candidates] <= max_deviation_px
+    return candidates[agree | (candidates == best)], Fd
+
+
 def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "knee",
            budget_ms: float | None = None, max_deviation_px: float = 1.0) -> tuple[int, dict]:
     """Choose a solution of the front by ``rule`` (see the module docstring).
@@ -156,18 +194,8 @@ def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "kn
     index : int
     decision : dict
     """
-    from .search.nsga import front_indices
-
-    best = int(np.argmin(F[:, 0]))
     if rule == "knee":
-        # Deviations span orders of magnitude (tens of px at the cheapest end, hundredths at
-        # the dearest): judge them on a log scale, floored where differences stop mattering.
-        Fd = np.column_stack([np.log10(deviation + DEVIATION_FLOOR_PX), F[:, 1]])
-        candidates = np.sort(front_indices(Fd))
-        # A cheaper solution is acceptable only if its calibration agrees with the
-        # best-supported one: a neighbouring minimum can win on a small sample.
-        agree = deviation[candidates] <= max_deviation_px
-        candidates = candidates[agree | (candidates == best)]
+        candidates, Fd = knee_candidates(F, deviation, max_deviation_px)
     else:
         Fd, candidates = F, np.arange(len(F))
     j, decision = choose(Fd[candidates], ms[candidates], rule, budget_ms)

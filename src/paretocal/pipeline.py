@@ -73,6 +73,10 @@ class CalibrationResult:
     history: list = field(default_factory=list)
     nsga_front: tuple | None = None
     quality: dict | None = None
+    #: The final objective (feature points chosen at the estimate) and the grid seeds of the
+    #: search, for studies that evaluate more candidates; not written to result.json.
+    objective: CalibrationObjective | None = None
+    seed_poses: np.ndarray | None = None
 
     @property
     def correction(self) -> dict[str, float]:
@@ -331,7 +335,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         cost_model=cost_model, settings=settings, evaluations=evaluations, wall_s=wall,
         timings=timings, frames=[f.name for f in frames],
         feature_counts=_feature_counts(feats), n_range=(n_min, n_max), history=res.history,
-        nsga_front=(res.X, res.F), quality=quality)
+        nsga_front=(res.X, res.F), quality=quality, objective=objective, seed_poses=seeds)
 
 
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:

@@ -183,14 +183,14 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
                      "and points/)")
 
 
-_SLICE = re.compile(r"^(-?\d*):(-?\d*)$")
+_SLICE = re.compile(r"^(-?\d*):(-?\d*)(?::(-?\d+))?$")
 
 
 def select_frames(names: list[str], spec: str | None) -> list[int]:
-    """Indices selected by a ``--frames`` spec: ``0:10``, ``0,3,7``, stems, or a mix.
+    """Indices selected by a ``--frames`` spec: ``0:10``, ``0:20:4``, ``0,3,7``, stems, or a mix.
 
     A token equal to a frame stem selects that frame; otherwise an integer is an index into the
-    frames in stem order and ``a:b`` a Python slice of them.
+    frames in stem order and ``a:b`` or ``a:b:step`` a Python slice of them.
     """
     if spec is None or str(spec).strip() == "":
         return list(range(len(names)))
@@ -206,7 +206,10 @@ def select_frames(names: list[str], spec: str | None) -> list[int]:
         if m:
             a = int(m.group(1)) if m.group(1) else None
             b = int(m.group(2)) if m.group(2) else None
-            chosen.extend(range(len(names))[slice(a, b)])
+            step = int(m.group(3)) if m.group(3) else None
+            if step == 0:
+                raise SettingsError(f"--frames {spec}: the step of {token!r} is zero")
+            chosen.extend(range(len(names))[slice(a, b, step)])
         elif re.fullmatch(r"-?\d+", token):
             i = int(token)
             if not -len(names) <= i < len(names):

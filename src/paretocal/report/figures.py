@@ -89,24 +89,32 @@ def pareto_figure(result, path: Path) -> None:
     _save(fig, path)
 
 
-def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
-                   z_min: float = 0.1, max_depth: float = 30.0) -> None:
-    """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
+def draw_overlay(ax, frame: Frame, T: np.ndarray, z_min: float = 0.1,
+                 max_depth: float = 30.0) -> int:
+    """Draw the frame's image with every LiDAR return in view at its projection, coloured by
+    depth (near on top); returns the number of points in view."""
     uv, z, vis = project(frame.points, frame.camera, T, z_min)
     rgb = frame.image[:, :, ::-1]
     h, w = rgb.shape[:2]
-    fig = plt.figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
-    ax = fig.add_axes([0, 0, 1, h / (h + 45)])
     ax.imshow(rgb)
     order = np.argsort(-z[vis])            # far first, near on top
-    sc = ax.scatter(uv[vis][order, 0], uv[vis][order, 1], c=np.clip(z[vis][order], 0, max_depth),
-                    cmap="turbo_r", s=1.2, lw=0, vmin=0, vmax=max_depth)
+    ax.scatter(uv[vis][order, 0], uv[vis][order, 1], c=np.clip(z[vis][order], 0, max_depth),
+               cmap="turbo_r", s=1.2, lw=0, vmin=0, vmax=max_depth)
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
     ax.axis("off")
+    return int(vis.sum())
+
+
+def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
+                   z_min: float = 0.1, max_depth: float = 30.0) -> None:
+    """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
+    h, w = frame.image.shape[:2]
+    fig = plt.figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
+    ax = fig.add_axes([0, 0, 1, h / (h + 45)])
+    k = draw_overlay(ax, frame, T, z_min, max_depth)
     fig.text(0.01, 1 - 0.3 * 45 / (h + 45), title, fontsize=11, va="center")
-    fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{int(vis.sum())} points in view, colour = depth "
+    fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{k} points in view, colour = depth "
              f"0-{max_depth:g} m   {KITTI_CREDIT}", fontsize=7, va="center", ha="right",
              color="0.3")
-    del sc
     _save(fig, path, dpi=100)
