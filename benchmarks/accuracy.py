@@ -69,6 +69,33 @@ def blind_copy(date: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) 
     return drive
 
 
+def blind_copy_object(root: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) -> Path:
+    """A KITTI object ``training`` folder whose calib files hold ``T_cam_lidar``.
+
+    Images and scans are symbolic links; each ``calib/<stem>.txt`` is rewritten with
+    ``Tr_velo_to_cam = (B R0_rect)^-1 T`` and its other lines unchanged.
+    """
+    out = dst / "training"
+    (out / "calib").mkdir(parents=True)
+    for d in (f"image_{camera}", "velodyne"):
+        (out / d).symlink_to((root / d).resolve(), target_is_directory=True)
+    for cfile in sorted((root / "calib").glob("*.txt")):
+        c = read_kitti_calib(cfile)
+        P = c[f"P{camera}"].reshape(3, 4)
+        B = np.eye(4)
+        B[:3, 3] = np.linalg.solve(P[:, :3], P[:, 3])
+        R = np.eye(4)
+        R[:3, :3] = c["R0_rect"].reshape(3, 3)
+        Tr = invert(B @ R) @ T_cam_lidar
+        lines = [f"Tr_velo_to_cam: {' '.join(f'{v:.12e}' for v in Tr[:3].ravel())}"
+                 if line.startswith("Tr_velo_to_cam:") else line
+                 for line in cfile.read_text().splitlines()]
+        (out / "calib" / cfile.name).write_text("\n".join(lines) + "\n")
+    check = detect_source(out, camera).frames[0].T_ref
+    assert np.allclose(check, T_cam_lidar, atol=1e-9), "blind copy does not hold the extrinsic"
+    return out
+
+
 def run_trial(k: int, args, T_ref: np.ndarray, work: Path) -> dict:
     rng = np.random.default_rng(1000 + k)
     p = np.r_[rng.uniform(-args.trans, args.trans, 3), rng.uniform(-args.rot, args.rot, 3)]
@@ -79,13 +106,14 @@ def run_trial(k: int, args, T_ref: np.ndarray, work: Path) -> dict:
         from paretocal.config import Settings, load_settings
 
         settings = load_settings(args.config) if args.config else Settings()
-        frames = load_frames(DATE, args.frames)
+        frames = load_frames(args.source, args.frames)
         r = calibrate(frames, T_init, settings)
         T = r.T_cam_lidar
         n = r.n_points
     else:
         trial = work / f"trial_{k:03d}"
-        drive = blind_copy(DATE, T_init, trial / "data")
+        drive = (blind_copy_object(args.source, T_init, trial / "data")
+                 if args.dataset == "object" else blind_copy(DATE, T_init, trial / "data"))
         init = trial / "init.yaml"
         write_extrinsic(init, T_init)
         run = trial / "run"
@@ -121,7 +149,8 @@ def summarise(rows: list[dict], args) -> str:
                 f"p95 {np.percentile(v, 95):.3f}, max {np.max(v):.3f}")
 
     lines = [f"summary: {len(rows)} trials, start +-{args.rot} deg / +-{args.trans} m per axis, "
-             f"frames {args.frames or 'all'}, via {'API' if args.api else 'CLI (blind copy)'}",
+             f"{args.dataset} frames {args.frames or 'all'}, "
+             f"via {'API' if args.api else 'CLI (blind copy)'}",
              f"  rotation (deg):    {stats(R)}",
              f"  translation (cm):  {stats(Tc)}"]
     for a in AXES:
@@ -140,6 +169,9 @@ def main() -> int:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--rot", type=float, default=10.0, help="per-axis bound, deg")
     ap.add_argument("--trans", type=float, default=0.25, help="per-axis bound, m")
+    ap.add_argument("--dataset", choices=("raw", "object"), default="raw",
+                    help="the 20-frame raw drive, or the single KITTI object frame (another "
+                         "scene, not used to tune anything)")
     ap.add_argument("--frames", default=None, help="frame selection, e.g. 0:10")
     ap.add_argument("--config", default=None, help="settings file (YAML/JSON by section)")
     ap.add_argument("--api", action="store_true", help="call the library, not the CLI")
@@ -147,7 +179,8 @@ def main() -> int:
     ap.add_argument("--keep", default=None, help="keep the blind copies and runs here")
     args = ap.parse_args()
 
-    T_ref = detect_source(DATE).frames[0].T_ref
+    args.source = DATE if args.dataset == "raw" else DATA / "kitti_object" / "training"
+    T_ref = detect_source(args.source).frames[0].T_ref
     rows = []
     with tempfile.TemporaryDirectory(prefix="paretocal-acc-") as tmp:
         work = Path(args.keep) if args.keep else Path(tmp)
