@@ -72,6 +72,22 @@ class TestLidarEdges:
         # a beam spacing (0.2 deg at 8 m = 2.8 cm) of the true silhouette at |y| = 1.
         np.testing.assert_allclose(np.abs(edges[side & ~top & ~bottom, 1]), 1.0, atol=0.015)
 
+    def test_edge_support_drops_foliage_and_keeps_silhouettes(self, rng):
+        K, img, pts, T = box_scene(rng)
+        pts = pts.copy()
+        # Foliage: returns left of the box scatter in range at random (10-20 m on their rays).
+        bush = (pts[:, 0] > 0) & (pts[:, 1] > 3) & (pts[:, 1] < 7) & (pts[:, 2] > -2)
+        r = np.linalg.norm(pts[bush, :3], axis=1)
+        pts[bush, :3] *= (rng.uniform(10, 20, bush.sum()) / r)[:, None]
+        plain = lidar_features(pts, smooth_ratio=0.0, rng=0)
+        kept = lidar_features(pts, smooth_ratio=0.0, edge_support=True, rng=0)
+        in_bush = lambda f: (f.xyz[:, 1] > 1.5) & (f.group == DEPTH_EDGE)  # noqa: E731
+        on_box = lambda f: (np.abs(f.xyz[:, 0] - 8) < 0.05) & (f.group == DEPTH_EDGE)  # noqa: E731
+        assert in_bush(plain).sum() > 100
+        assert in_bush(kept).sum() < 0.1 * in_bush(plain).sum()
+        # The box's silhouette survives almost entirely.
+        assert on_box(kept).sum() > 0.9 * on_box(plain).sum() > 50
+
     def test_intensity_edges_only_on_one_surface(self, rng):
         pts = np.array([[10.0, y, 0.0, 0.1 if y < 4 else 0.9] for y in np.linspace(2, 6, 400)],
                        dtype=np.float32)

@@ -33,6 +33,7 @@ class FeatureSettings:
     ground_tol_m: float | None = None  #: ignore cross-ring pairs with both returns on the ground
     along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
     cross_fraction: float = 0.25     #: the same across rings (see README, Method)
+    edge_support: bool = False       #: keep depth edges only where the near side is a surface
     intensity_jump: float = 0.3      #: reflectance jump for an intensity edge
     min_range_m: float = 1.5
     max_range_m: float = 70.0

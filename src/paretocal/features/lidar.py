@@ -58,6 +58,7 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                    max_range_m: float = 70.0, max_gap_deg: float = 1.0,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
                    along_fraction: float = 0.5, cross_fraction: float = 0.5,
+                   edge_support: bool = False,
                    rng: np.random.Generator | int | None = 0,
                    ring: np.ndarray | None = None) -> LidarFeatures:
     """Extract feature points from one sweep.
@@ -89,6 +90,11 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     along_fraction, cross_fraction : float
         Where an edge point is placed between the near ray and its far neighbour (0 = on the
         near ray, 0.5 = midway), along a ring and across rings.
+    edge_support : bool
+        Keep a depth edge only when its near return continues a surface: the next two returns
+        on the other side (along the ring, or on the two rings on the other side across
+        rings) lie within ``0.05 r + 0.1`` m of its range. Foliage and other isolated returns
+        jump in range at almost every return and make edges that no image edge matches.
     rng : numpy Generator or seed
         Drives the subsampling of smooth points.
     ring : ndarray, shape (N,), optional
@@ -135,6 +141,16 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     jump = np.maximum(jump_n, jump_p)
     is_edge = jump > depth_jump_m
     far = np.where(jump_n >= jump_p, nxt, prv)
+    if edge_support:
+        # The next two returns on the other side along the ring must lie on the near return's
+        # own surface (one could be a coincidence in foliage).
+        tol = 0.05 * r + 0.1
+        back = jump_n >= jump_p
+        o1 = np.where(back, prv, nxt)
+        o2 = np.where(back, prv[o1], nxt[o1])
+        o1_ok = np.where(back, ok_p, ok_n)
+        o2_ok = np.where(back, ok_p[o1], ok_n[o1])
+        is_edge &= (o1_ok & o2_ok & (np.abs(r[o1] - r) < tol) & (np.abs(r[o2] - r) < tol))
     edge_pos = np.zeros_like(xyz)
     edge_pos[is_edge] = _between_rays(xyz[is_edge], xyz[far[is_edge]], r[is_edge],
                                        along_fraction)
@@ -159,15 +175,26 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         key = seg_of * 8.0 + psi                       # ascending (psi < 2 pi < 8)
         best_jump = np.zeros(n)
         best_far = np.full(n, -1)
-        for step in (-1, 1):                           # the ring above, then the ring below
+        def across(step):
+            """Azimuth-nearest return on the ring ``step`` places above (-1) or below (+1)."""
             tgt_pos = pos_of[seg_of] + step
             ok = (tgt_pos >= 0) & (tgt_pos < len(ids))
             tgt = by_el[np.clip(tgt_pos, 0, len(ids) - 1)]
             cand, dpsi = _nearest_in_segment(key, psi, tgt, seg_start[tgt], seg_end[tgt])
+            return cand, ok & (dpsi < gap)
+
+        nb = {step: across(step) for step in ((-2, -1, 1, 2) if edge_support else (-1, 1))}
+        for step in (-1, 1):                           # the ring above, then the ring below
+            cand, ok = nb[step]
             thr = np.maximum(cross_jump_m, cross_jump_rel * r)
             cj = r[cand] - r
-            hit = (ok & (dpsi < gap) & (cj > thr) & ~is_edge & ~(on_ground & on_ground[cand])
+            hit = (ok & (cj > thr) & ~is_edge & ~(on_ground & on_ground[cand])
                    & (cj > best_jump))
+            if edge_support:
+                # The two rings on the other side must hit the near return's own surface.
+                (c1, ok1), (c2, ok2) = nb[-step], nb[-2 * step]
+                tol = 0.05 * r + 0.1
+                hit &= ok1 & ok2 & (np.abs(r[c1] - r) < tol) & (np.abs(r[c2] - r) < tol)
             best_jump[hit] = cj[hit]
             best_far[hit] = cand[hit]
         idx = np.flatnonzero(best_far >= 0)

@@ -114,7 +114,7 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
         max_range_m=features.max_range_m,
         smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,
         ring_method=features.ring_method, along_fraction=features.along_fraction,
-        cross_fraction=features.cross_fraction, rng=rng)
+        cross_fraction=features.cross_fraction, edge_support=features.edge_support, rng=rng)
     keep = _wanted_groups(lf.group, objective)
     uv, z, _ = project(lf.xyz, frame.camera, T_init, features.z_min)
     keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
