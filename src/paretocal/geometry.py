@@ -144,29 +144,33 @@ def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def check_rigid(T, name: str, tol: float = 1e-4) -> np.ndarray:
+def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
+                orthonormalise: bool = True) -> np.ndarray:
     """Validate a 4x4 rigid transform read from a file and return it as float64.
 
-    Raises :class:`InputError` naming ``name`` when the shape is wrong, values are not finite,
-    the bottom row is not ``[0, 0, 0, 1]`` or the rotation block is not a proper rotation.
+    Raises :class:`InputError` naming the file ``name`` and the matrix ``key`` when the shape
+    is wrong, values are not finite, the bottom row is not ``[0, 0, 0, 1]`` or the rotation
+    block is not a proper rotation. A 3x4 matrix gets the bottom row added.
     """
     try:
         T = np.asarray(T, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}: T_cam_lidar is not a numeric matrix ({exc})") from None
+        raise InputError(f"{name}: {key} is not a numeric matrix ({exc})") from None
     if T.shape == (3, 4):
         T = np.vstack([T, [0.0, 0.0, 0.0, 1.0]])
     if T.shape != (4, 4):
-        raise InputError(f"{name}: T_cam_lidar must be 4x4 (or 3x4), got shape {T.shape}")
+        raise InputError(f"{name}: {key} must be 4x4 (or 3x4), got shape {T.shape}")
     if not np.all(np.isfinite(T)):
-        raise InputError(f"{name}: T_cam_lidar contains NaN or infinite values")
+        raise InputError(f"{name}: {key} contains NaN or infinite values")
     if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise InputError(f"{name}: the last row of T_cam_lidar must be [0, 0, 0, 1]")
+        raise InputError(f"{name}: the last row of {key} must be [0, 0, 0, 1]")
     R = T[:3, :3]
     err = np.abs(R.T @ R - np.eye(3)).max()
     if err > tol or np.linalg.det(R) < 0:
-        raise InputError(f"{name}: the rotation block of T_cam_lidar is not a rotation matrix "
+        raise InputError(f"{name}: the rotation block of {key} is not a rotation matrix "
                          f"(|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4f})")
+    if not orthonormalise:
+        return T
     # Re-orthonormalise so that 6-7 significant digits in a file do not accumulate.
     U, _, Vt = np.linalg.svd(R)
     T[:3, :3] = U @ Vt

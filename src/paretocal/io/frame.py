@@ -28,6 +28,9 @@ class Frame:
         The dataset's own ``T_cam_lidar`` when it has one (the reference for evaluation).
     image_path, points_path : Path
         Where the frame was read from.
+    kitti_rect : ndarray, shape (4, 4), or None
+        KITTI sources only: ``[I | b] @ R_rect_00``, so that ``T_cam_lidar = kitti_rect @ Tr``
+        with KITTI's ``Tr_velo_to_cam`` (used to export the result in KITTI's own form).
     """
 
     name: str
@@ -37,6 +40,7 @@ class Frame:
     T_ref: np.ndarray | None
     image_path: Path
     points_path: Path
+    kitti_rect: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:

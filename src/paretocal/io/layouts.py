@@ -30,7 +30,12 @@ class FrameFiles:
     points_path: Path
     camera: Camera
     T_ref: np.ndarray | None
-    dist: np.ndarray | None = None  # OpenCV distortion of the raw image, if any
+    dist: np.ndarray | None = None  # distortion of the raw image, if any (see dist_model)
+    #: "pinhole": ``dist`` holds OpenCV's k1, k2, p1, p2[, k3, ...] (cv2.undistort);
+    #: "fisheye": ``dist`` holds the equidistant k1..k4 (cv2.fisheye).
+    dist_model: str = "pinhole"
+    #: KITTI sources only: ``[I | b] @ R_rect_00`` (4x4), so that ``T_ref = kitti_rect @ Tr``.
+    kitti_rect: np.ndarray | None = None
 
 
 @dataclass
@@ -96,10 +101,12 @@ def _kitti_raw(root: Path, camera_index: int) -> Source:
     Tr[:3, :3] = calib_matrix(v2c, "R", (3, 3), v2c_path)
     Tr[:3, 3] = calib_matrix(v2c, "T", (1, 3), v2c_path)[0]
     cam, B = _camera_from_P(P, size[0], size[1])
-    T_ref = check_rigid(B @ _rect4(R_rect) @ Tr, str(v2c_path))
+    rect = B @ _rect4(R_rect)
+    T_ref = check_rigid(rect @ Tr, str(v2c_path))
     pairs = _pair(drive, drive / f"image_0{camera_index}" / "data",
                   drive / "velodyne_points" / "data", point_suffixes=(".bin",))
-    return Source("kitti_raw", drive, [FrameFiles(s, i, p, cam, T_ref) for s, i, p in pairs])
+    return Source("kitti_raw", drive, [FrameFiles(s, i, p, cam, T_ref, kitti_rect=rect)
+                                       for s, i, p in pairs])
 
 
 def _kitti_object(root: Path, camera_index: int) -> Source:
@@ -116,7 +123,9 @@ def _kitti_object(root: Path, camera_index: int) -> Source:
         # The object benchmark's calib files carry no image size: read it from the image header.
         shape = _image_shape(img)
         cam, B = _camera_from_P(P, shape[1], shape[0])
-        frames.append(FrameFiles(stem, img, pts, cam, check_rigid(B @ _rect4(R0) @ Tr, str(cpath))))
+        rect = B @ _rect4(R0)
+        frames.append(FrameFiles(stem, img, pts, cam, check_rigid(rect @ Tr, str(cpath)),
+                                 kitti_rect=rect))
     return Source("kitti_object", root, frames)
 
 
@@ -127,37 +136,142 @@ def _image_shape(path: Path) -> tuple[int, int]:
     return img.shape[:2]
 
 
-def _folder(root: Path) -> Source:
-    cpath = root / "calib.yaml"
-    data = read_mapping(cpath)
+#: Distortion model names of calib.yaml (``camera.model``) and of ROS camera_info
+#: (``distortion_model``), mapped to how the image is undistorted.
+_DIST_MODELS = {"pinhole": "pinhole", "plumb_bob": "pinhole", "rational_polynomial": "pinhole",
+                "radtan": "pinhole", "fisheye": "fisheye", "equidistant": "fisheye"}
+_OPENCV_D_SIZES = (4, 5, 8, 12, 14)
+
+
+def _intrinsics(path: Path, where: dict[str, str], K, width, height, D,
+                model) -> tuple[Camera, np.ndarray | None, str]:
+    """Validate intrinsics read from ``path``; ``where`` maps a role to the key that held it.
+
+    Returns the pinhole camera of the undistorted images, the distortion (None when there is
+    nothing to undo) and the distortion model ("pinhole" or "fisheye").
+    """
+    try:
+        K = np.asarray(K, dtype=np.float64)
+        width, height = int(width), int(height)
+        D = None if D is None else np.asarray(D, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{path}: camera values are not numbers ({exc})") from None
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise InputError(f"{path}: {where['K']} must be a finite 3x3 matrix, got shape {K.shape}")
+    if not np.allclose(K[2], [0, 0, 1]) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError(f"{path}: {where['K']} must have positive focal lengths and last row "
+                         "[0, 0, 1]")
+    if width <= 0 or height <= 0:
+        raise InputError(f"{path}: {where['width']} and {where['height']} must be positive")
+    key = str(model).strip().lower() if model is not None else "pinhole"
+    if key not in _DIST_MODELS:
+        raise InputError(f"{path}: {where['model']} {model!r} is not one of "
+                         f"{', '.join(_DIST_MODELS)}")
+    kind = _DIST_MODELS[key]
+    if D is not None and not np.all(np.isfinite(D)):
+        raise InputError(f"{path}: {where['D']} contains NaN or infinite values")
+    if kind == "fisheye":
+        if D is None:
+            D = np.zeros(4)  # the ideal equidistant lens: still not a pinhole, undistort it
+        if D.size != 4:
+            raise InputError(f"{path}: {where['D']} must hold the 4 fisheye (equidistant) "
+                             f"coefficients k1, k2, k3, k4, got {D.size}")
+    elif D is not None:
+        if D.size not in _OPENCV_D_SIZES:
+            raise InputError(f"{path}: {where['D']} must hold 4, 5, 8, 12 or 14 finite OpenCV "
+                             f"coefficients, got {D.size}")
+        if not np.any(D):
+            D = None
+    return Camera(K=K, width=width, height=height), D, kind
+
+
+def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np.ndarray | None:
+    """A ROS camera_info matrix ``{rows, cols, data}``; None when the key is absent."""
+    m = info.get(key)
+    if m is None:
+        return None
+    name = f"{prefix}{key}"
+    if not isinstance(m, dict) or "data" not in m:
+        raise InputError(f"{path}: {name} must be a mapping with rows, cols and data")
+    try:
+        data = np.asarray(m["data"], dtype=np.float64)
+        rows = int(m.get("rows", shape[0] if shape else 1))
+        cols = int(m.get("cols", shape[1] if shape else data.size))
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{path}: {name} values are not numbers ({exc})") from None
+    if data.ndim != 1:
+        raise InputError(f"{path}: {name}.data must be a flat list of numbers")
+    if rows * cols != data.size:
+        raise InputError(f"{path}: {name}.data has {data.size} values, rows x cols is "
+                         f"{rows} x {cols}")
+    if shape is not None and (rows, cols) != shape:
+        raise InputError(f"{path}: {name} must be {shape[0]} x {shape[1]}, got {rows} x {cols}")
+    if not np.all(np.isfinite(data)):
+        raise InputError(f"{path}: {name} contains NaN or infinite values")
+    return data.reshape(rows, cols)
+
+
+def _camera_info(path: Path, info: dict, prefix: str = "") -> tuple[Camera, np.ndarray | None, str]:
+    """Intrinsics from a ROS ``camera_info`` mapping (camera_calibration_parsers' YAML form).
+
+    Uses ``camera_matrix`` and the distortion; ``rectification_matrix`` and
+    ``projection_matrix`` are ignored: images are undistorted into the camera's own frame with
+    the same K, which is the frame ``T_cam_lidar`` refers to.
+    """
+    for key in ("image_width", "image_height", "camera_matrix"):
+        if info.get(key) is None:
+            raise InputError(f"{path}: missing {prefix}{key}")
+    K = _ros_matrix(path, info, "camera_matrix", prefix, (3, 3))
+    D = _ros_matrix(path, info, "distortion_coefficients", prefix)
+    model = info.get("distortion_model")
+    if model is None or str(model).strip().lower() in ("", "none"):
+        if D is not None and np.any(D):
+            raise InputError(f"{path}: {prefix}distortion_coefficients are not zero but "
+                             f"{prefix}distortion_model is missing or none (expected plumb_bob, "
+                             "rational_polynomial or equidistant)")
+        model, D = None, None
+    where = {"K": f"{prefix}camera_matrix", "width": f"{prefix}image_width",
+             "height": f"{prefix}image_height", "model": f"{prefix}distortion_model",
+             "D": f"{prefix}distortion_coefficients"}
+    return _intrinsics(path, where, K, info["image_width"], info["image_height"], D, model)
+
+
+def _folder_camera(root: Path, cpath: Path, data: dict) -> tuple[Camera, np.ndarray | None, str]:
+    """The camera of a generic folder: ``camera`` in calib.yaml, or a ROS camera_info file."""
+    if data.get("camera_info") is not None:
+        if data.get("camera") is not None:
+            raise InputError(f"{cpath}: give either 'camera' or 'camera_info', not both")
+        ref = data["camera_info"]
+        if not isinstance(ref, str) or not ref.strip():
+            raise InputError(f"{cpath}: camera_info must be the path of a ROS camera_info YAML "
+                             "file (relative to the folder)")
+        ipath = root / ref
+        if not ipath.is_file():
+            raise InputError(f"{cpath}: camera_info file {ipath} not found")
+        return _camera_info(ipath, read_mapping(ipath))
     cam = data.get("camera")
     if not isinstance(cam, dict):
         raise InputError(f"{cpath}: missing 'camera' section")
+    if "camera_matrix" in cam or "image_width" in cam:
+        return _camera_info(cpath, cam, "camera.")
     for key in ("K", "width", "height"):
         if key not in cam:
             raise InputError(f"{cpath}: missing camera.{key}")
-    try:
-        K = np.asarray(cam["K"], dtype=np.float64)
-        width, height = int(cam["width"]), int(cam["height"])
-        D = None if cam.get("D") is None else np.asarray(cam["D"], dtype=np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{cpath}: camera values are not numbers ({exc})") from None
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
-        raise InputError(f"{cpath}: camera.K must be a finite 3x3 matrix, got shape {K.shape}")
-    if not np.allclose(K[2], [0, 0, 1]) or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise InputError(f"{cpath}: camera.K must have positive focal lengths and last row [0, 0, 1]")
-    if width <= 0 or height <= 0:
-        raise InputError(f"{cpath}: camera.width and camera.height must be positive")
-    if D is not None and (D.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(D))):
-        raise InputError(f"{cpath}: camera.D must hold 4, 5, 8, 12 or 14 finite OpenCV "
-                         f"coefficients, got {D.size}")
+    where = {k: f"camera.{k}" for k in ("K", "width", "height", "model", "D")}
+    return _intrinsics(cpath, where, cam["K"], cam["width"], cam["height"], cam.get("D"),
+                       cam.get("model"))
+
+
+def _folder(root: Path) -> Source:
+    cpath = root / "calib.yaml"
+    data = read_mapping(cpath)
+    camera, dist, model = _folder_camera(root, cpath, data)
     T_ref = None
     if data.get("T_cam_lidar") is not None:
         T_ref = check_rigid(data["T_cam_lidar"], str(cpath))
-    camera = Camera(K=K, width=width, height=height)
     pairs = _pair(root, root / "images", root / "points")
-    dist = None if D is None or not np.any(D) else D
-    return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, dist) for s, i, p in pairs])
+    return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, dist, model)
+                                   for s, i, p in pairs])
 
 
 def detect_source(source: Path, camera_index: int = 2) -> Source:
@@ -225,16 +339,24 @@ def select_frames(names: list[str], spec: str | None) -> list[int]:
 
 
 def read_frame(files: FrameFiles) -> Frame:
-    """Read one frame's image and points, undistorting the image when the camera has ``D``."""
+    """Read one frame's image and points, undistorting the image when the camera has ``D``.
+
+    A fisheye (equidistant) image is remapped with ``cv2.fisheye`` to a pinhole image with the
+    same K, so the rest of the pipeline sees a plain pinhole camera either way.
+    """
     image = read_image(files.image_path)
     cam = files.camera
     if image.shape[1] != cam.width or image.shape[0] != cam.height:
         raise InputError(f"{files.image_path}: image is {image.shape[1]}x{image.shape[0]} but the "
                          f"calibration says {cam.width}x{cam.height}")
-    if files.dist is not None:
+    if files.dist is not None and files.dist_model == "fisheye":
+        image = cv2.fisheye.undistortImage(image, cam.K, files.dist, Knew=cam.K,
+                                           new_size=(cam.width, cam.height))
+    elif files.dist is not None:
         image = cv2.undistort(image, cam.K, files.dist)
     points = read_points(files.points_path)
-    return Frame(files.name, image, points, cam, files.T_ref, files.image_path, files.points_path)
+    return Frame(files.name, image, points, cam, files.T_ref, files.image_path, files.points_path,
+                 kitti_rect=files.kitti_rect)
 
 
 def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) -> list[Frame]:

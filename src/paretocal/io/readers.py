@@ -5,8 +5,10 @@ Every failure raises :class:`~paretocal.errors.InputError` naming the file and w
 
 from __future__ import annotations
 
+import io
 import json
 import logging
+import re
 from pathlib import Path
 
 import cv2
@@ -17,16 +19,21 @@ from ..errors import InputError
 
 log = logging.getLogger(__name__)
 
-POINT_SUFFIXES = (".bin", ".npy")
+POINT_SUFFIXES = (".bin", ".npy", ".pcd", ".ply")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+#: Field names read as the intensity column of a .pcd or .ply cloud (case-insensitive, first wins).
+INTENSITY_FIELDS = ("intensity", "i", "reflectance")
 
 
 def read_points(path: Path) -> np.ndarray:
     """Read a LiDAR sweep as an (N, 4) float32 array ``x, y, z, intensity``.
 
     ``.bin`` holds float32 quadruples (KITTI); ``.npy`` holds an (N, 3) or (N, 4) array (a
-    missing intensity column reads as zeros). Points with a NaN or infinite coordinate are
-    dropped with a warning that counts them.
+    missing intensity column reads as zeros); ``.pcd`` (PCL: ascii, binary or binary_compressed)
+    and ``.ply`` (ascii, binary little or big endian) need fields ``x``, ``y``, ``z`` and may have
+    an intensity field named ``intensity``, ``i`` or ``reflectance`` (zeros without one); other
+    fields are ignored. Points with a NaN or infinite coordinate are dropped with a warning that
+    counts them; a NaN or infinite intensity reads as zero.
     """
     path = Path(path)
     if not path.is_file():
@@ -48,6 +55,10 @@ def read_points(path: Path) -> np.ndarray:
                 raise InputError(f"{path}: expected numbers, got dtype {arr.dtype}")
             pts = np.zeros((arr.shape[0], 4), dtype=np.float32)
             pts[:, : arr.shape[1]] = arr
+        elif suffix == ".pcd":
+            pts = _read_pcd(path, path.read_bytes())
+        elif suffix == ".ply":
+            pts = _read_ply(path, path.read_bytes())
         else:
             raise InputError(f"{path}: unsupported point cloud format {suffix!r} "
                              f"(supported: {', '.join(POINT_SUFFIXES)})")
@@ -64,6 +75,274 @@ def read_points(path: Path) -> np.ndarray:
     if len(pts) == 0:
         raise InputError(f"{path}: the point cloud is empty")
     return np.ascontiguousarray(pts)
+
+
+def _xyzi(path: Path, fields: dict[str, np.ndarray]) -> np.ndarray:
+    """Stack named columns into (N, 4) float32 ``x, y, z, intensity`` (zeros without intensity)."""
+    lower: dict[str, np.ndarray] = {}
+    for name, col in fields.items():
+        lower.setdefault(name.lower(), col)
+    missing = [c for c in "xyz" if c not in lower]
+    if missing:
+        raise InputError(f"{path}: no {', '.join(repr(c) for c in missing)} field "
+                         f"(fields: {', '.join(fields) or 'none'}); x, y and z are required")
+    n = len(lower["x"])
+    pts = np.zeros((n, 4), dtype=np.float32)
+    for j, c in enumerate("xyz"):
+        pts[:, j] = lower[c]
+    for name in INTENSITY_FIELDS:
+        if name in lower:
+            pts[:, 3] = lower[name]
+            break
+    return pts
+
+
+def _first_line(exc: Exception) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+# --- PCD (PCL) -----------------------------------------------------------------------------------
+
+_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4",
+              ("U", 8): "u8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8"}
+_PCD_DATA = ("ascii", "binary", "binary_compressed")
+
+
+def _pcd_header(path: Path, raw: bytes) -> tuple[dict[str, list[str]], int]:
+    """Header entries (upper-case key -> values) and the offset of the data."""
+    entries: dict[str, list[str]] = {}
+    lines: list[str] = []
+    pos = 0
+    while "DATA" not in entries:
+        nl = raw.find(b"\n", pos)
+        if nl < 0 or len(lines) > 64:
+            raise InputError(f"{path}: not a PCD file: no 'DATA' line in the header")
+        try:
+            line = raw[pos:nl].decode("ascii").strip()
+        except UnicodeDecodeError:
+            if lines:
+                raise InputError(f"{path}: PCD header has no 'DATA' line before the data") from None
+            raise InputError(f"{path}: not a PCD file: the header is not text") from None
+        pos = nl + 1
+        if not line or line.startswith("#"):
+            continue
+        key, *values = line.split()
+        if not lines and key.upper() not in ("VERSION", "FIELDS"):
+            raise InputError(f"{path}: not a PCD file: the header starts with {key!r} "
+                             "instead of VERSION or FIELDS")
+        entries[key.upper()] = values
+        lines.append(line)
+    return entries, pos
+
+
+def _pcd_int(path: Path, entries: dict[str, list[str]], key: str) -> int:
+    try:
+        value = int(entries[key][0])
+    except (KeyError, IndexError, ValueError):
+        raise InputError(f"{path}: PCD header {key} must be a non-negative integer, got "
+                         f"{' '.join(entries.get(key, [])) or 'nothing'}") from None
+    if value < 0:
+        raise InputError(f"{path}: PCD header {key} must be a non-negative integer, got {value}")
+    return value
+
+
+def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
+    """A PCL point cloud file as (N, 4) float32; binary_compressed data is decoded by pypcd4."""
+    entries, offset = _pcd_header(path, raw)
+    for key in ("FIELDS", "SIZE", "TYPE"):
+        if not entries.get(key):
+            raise InputError(f"{path}: PCD header has no {key} line")
+    fields = entries["FIELDS"]
+    counts_text = entries.get("COUNT") or ["1"] * len(fields)
+    for key, vals in (("SIZE", entries["SIZE"]), ("TYPE", entries["TYPE"]), ("COUNT", counts_text)):
+        if len(vals) != len(fields):
+            raise InputError(f"{path}: PCD header {key} has {len(vals)} entries for "
+                             f"{len(fields)} FIELDS")
+    try:
+        sizes = [int(v) for v in entries["SIZE"]]
+        counts = [int(v) for v in counts_text]
+    except ValueError:
+        raise InputError(f"{path}: PCD header SIZE and COUNT must be integers") from None
+    types = [t.upper() for t in entries["TYPE"]]
+    for name, t, s, c in zip(fields, types, sizes, counts):
+        if (t, s) not in _PCD_TYPES:
+            raise InputError(f"{path}: PCD field {name!r} has unsupported TYPE {t} SIZE {s}")
+        if c < 1:
+            raise InputError(f"{path}: PCD field {name!r} has COUNT {c}")
+    for name, c in zip(fields, counts):
+        if name.lower() in ("x", "y", "z") + INTENSITY_FIELDS and c != 1:
+            raise InputError(f"{path}: PCD field {name!r} has COUNT {c}, expected 1")
+    width = _pcd_int(path, entries, "WIDTH") if "WIDTH" in entries else None
+    height = _pcd_int(path, entries, "HEIGHT") if "HEIGHT" in entries else 1
+    if "POINTS" in entries:
+        n = _pcd_int(path, entries, "POINTS")
+    elif width is not None:
+        n = width * height
+    else:
+        raise InputError(f"{path}: PCD header has neither POINTS nor WIDTH")
+    if width is not None and width * height != n:
+        raise InputError(f"{path}: PCD header says WIDTH {width} x HEIGHT {height} but POINTS {n}")
+    data = (entries["DATA"] or [""])[0].lower()
+    if data not in _PCD_DATA:
+        raise InputError(f"{path}: PCD header DATA {data!r} is not one of {', '.join(_PCD_DATA)}")
+    # One column per field and count; padding fields are named "_" and may repeat.
+    names, formats = [], []
+    for k, (name, t, s, c) in enumerate(zip(fields, types, sizes, counts)):
+        for j in range(c):
+            names.append(name if c == 1 and name != "_" else f"_{k}_{j}_{name}")
+            formats.append(_PCD_TYPES[(t, s)])
+    if len(set(names)) != len(names):
+        raise InputError(f"{path}: PCD header FIELDS names a field twice ({' '.join(fields)})")
+    dtype = np.dtype({"names": names, "formats": ["<" + f for f in formats]})
+    body = raw[offset:]
+    if n == 0:
+        return _xyzi(path, {name: np.zeros(0) for name in names if not name.startswith("_")})
+    if data == "ascii":
+        # Whitespace-separated values, one point per line (tolerant of tabs and trailing blanks).
+        try:
+            table = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None)
+        except ValueError as exc:
+            raise InputError(f"{path}: PCD ascii data cannot be parsed ({_first_line(exc)})") from None
+        if table.shape != (n, len(names)):
+            raise InputError(f"{path}: PCD ascii data has {table.shape[0]} rows of "
+                             f"{table.shape[1] if table.size else 0} values; the header says "
+                             f"POINTS {n} of {len(names)} values (truncated or wrong header)")
+        cols = {name: table[:, j] for j, name in enumerate(names)}
+    elif data == "binary":
+        need = n * dtype.itemsize
+        if len(body) < need:
+            raise InputError(f"{path}: PCD binary data is truncated: {len(body)} bytes for "
+                             f"POINTS {n} of {dtype.itemsize} bytes ({need} bytes)")
+        arr = np.frombuffer(body, dtype=dtype, count=n)
+        cols = {name: arr[name] for name in names}
+    else:
+        cols = dict(zip(names, _pcd_compressed(path, body, types, sizes, counts, n)))
+    return _xyzi(path, {k: v for k, v in cols.items() if not k.startswith("_")})
+
+
+def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
+                    counts: list[int], n: int) -> list[np.ndarray]:
+    """Decode binary_compressed data (LZF, field-major) with pypcd4; one array per value column."""
+    from pypcd4 import PointCloud
+
+    if len(body) < 8:
+        raise InputError(f"{path}: PCD binary_compressed data is truncated (no size words)")
+    # pypcd4 parses a fixed set of header lines: hand it a canonical header of the fields parsed
+    # here (plain names, so that padding fields called "_" keep their place).
+    k = len(types)
+    head = (f"FIELDS {' '.join(f'f{j}' for j in range(k))}\nSIZE {' '.join(map(str, sizes))}\n"
+            f"TYPE {' '.join(types)}\nCOUNT {' '.join(map(str, counts))}\nWIDTH {n}\nHEIGHT 1\n"
+            f"POINTS {n}\nDATA binary_compressed\n")
+    try:
+        arr = PointCloud.from_fileobj(io.BytesIO(head.encode() + body)).pc_data
+    except Exception as exc:  # any decoder failure means a corrupt file
+        raise InputError(f"{path}: PCD binary_compressed data cannot be decoded "
+                         f"({_first_line(exc)}); the file is truncated or corrupt") from None
+    if arr.ndim != 1 or len(arr) != n or len(arr.dtype.names or ()) != sum(counts):
+        raise InputError(f"{path}: PCD binary_compressed data holds {arr.size} points, the header "
+                         f"says POINTS {n}")
+    return [arr[name] for name in arr.dtype.names]
+
+
+# --- PLY ------------------------------------------------------------------------------------------
+
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+              "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+              "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+              "float64": "f8"}
+_PLY_FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
+
+
+def _read_ply(path: Path, raw: bytes) -> np.ndarray:
+    """The ``vertex`` element of a PLY file as (N, 4) float32 ``x, y, z, intensity``."""
+    if not re.match(rb"ply\r?\n", raw[:5]):
+        raise InputError(f"{path}: not a PLY file (the first line is not 'ply')")
+    end = re.search(rb"(^|\n)end_header[ \t]*\r?\n", raw[:1 << 20])
+    if end is None:
+        raise InputError(f"{path}: PLY header has no 'end_header' line")
+    offset = end.end()
+    try:
+        header = raw[:end.start()].decode("ascii").splitlines()[1:]
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: PLY header is not text") from None
+    fmt = None
+    elements: list[list] = []  # [name, count, [(property, type) or (property, None) for lists]]
+    for line in header:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        try:
+            if words[0] == "format":
+                fmt = words[1]
+                if fmt not in _PLY_FORMATS:
+                    raise InputError(f"{path}: unsupported PLY format {fmt!r} (supported: "
+                                     f"{', '.join(_PLY_FORMATS)})")
+            elif words[0] == "element":
+                elements.append([words[1], int(words[2]), []])
+                if elements[-1][1] < 0:
+                    raise ValueError
+            elif words[0] == "property":
+                if not elements:
+                    raise ValueError
+                if words[1] == "list":
+                    elements[-1][2].append((words[4], None))
+                else:
+                    if words[1] not in _PLY_TYPES:
+                        raise InputError(f"{path}: PLY property {words[2]!r} has unknown type "
+                                         f"{words[1]!r}")
+                    elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
+            else:
+                raise ValueError
+        except (IndexError, ValueError):
+            raise InputError(f"{path}: malformed PLY header line {line!r}") from None
+    if fmt is None:
+        raise InputError(f"{path}: PLY header has no 'format' line")
+    names = [e[0] for e in elements]
+    if "vertex" not in names:
+        raise InputError(f"{path}: PLY file has no 'vertex' element")
+    iv = names.index("vertex")
+    _, n, props = elements[iv]
+    lists = [p for p, t in props if t is None]
+    if lists:
+        raise InputError(f"{path}: PLY vertex property {lists[0]!r} is a list; points need "
+                         "scalar properties")
+    pnames = [p for p, _ in props]
+    if len(set(pnames)) != len(pnames):
+        raise InputError(f"{path}: PLY vertex element names a property twice")
+    body = raw[offset:]
+    if fmt == "ascii":
+        # One line per element instance: skip the lines of the elements before the vertices.
+        skip = sum(e[1] for e in elements[:iv])
+        if n == 0:
+            return np.zeros((0, 4), np.float32)
+        try:
+            table = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None,
+                               skiprows=skip, max_rows=n)
+        except ValueError as exc:
+            raise InputError(f"{path}: PLY ascii vertex data cannot be parsed "
+                             f"({_first_line(exc)})") from None
+        if table.shape != (n, len(pnames)):
+            raise InputError(f"{path}: PLY ascii data has {table.shape[0]} vertex lines of "
+                             f"{table.shape[1] if table.size else 0} values; the header says "
+                             f"{n} of {len(pnames)} (truncated or wrong header)")
+        cols = {p: table[:, j] for j, p in enumerate(pnames)}
+    else:
+        endian = _PLY_FORMATS[fmt]
+        start = 0
+        for name, count, eprops in elements[:iv]:
+            if any(t is None for _, t in eprops):
+                raise InputError(f"{path}: PLY element {name!r} before 'vertex' has list "
+                                 "properties; binary files with that layout are not supported")
+            start += count * sum(np.dtype(t).itemsize for _, t in eprops)
+        dtype = np.dtype([(p, endian + t) for p, t in props])
+        need = start + n * dtype.itemsize
+        if len(body) < need:
+            raise InputError(f"{path}: PLY binary data is truncated: {len(body)} bytes after the "
+                             f"header, {need} needed for {n} vertices of {dtype.itemsize} bytes")
+        arr = np.frombuffer(body, dtype=dtype, count=n, offset=start)
+        cols = {p: arr[p] for p in pnames}
+    return _xyzi(path, cols)
 
 
 def read_image(path: Path) -> np.ndarray:

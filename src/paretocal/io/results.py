@@ -1,4 +1,7 @@
-"""Writing a calibration run: result.json, pareto.csv, extrinsic.yaml and figures.
+"""Writing a calibration run: result.json, pareto.csv, extrinsic.yaml, exports and figures.
+
+The exports (:mod:`.exports`) are the chosen extrinsic as KITTI ``calib_velo_to_cam.txt``, ROS
+``tf_static.yaml`` and its inverse ``extrinsic_inverse.yaml``.
 
 Every file is written atomically (temporary file, then rename).
 """
@@ -14,6 +17,7 @@ import numpy as np
 
 from ..search.problem import VARIABLES
 from .atomic import atomic_write_text
+from .exports import kitti_rect_of, write_exports
 from .extrinsic import write_extrinsic
 from .frame import Frame
 
@@ -68,6 +72,7 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
                     comment=f"paretocal {doc['version']}: chosen T_cam_lidar (LiDAR -> camera), "
                             f"rule {result.decision['rule']}, n = {result.n_points}")
     written.append(out / "extrinsic.yaml")
+    written += write_exports(out, result.T_cam_lidar, kitti_rect_of(frames), str(doc["version"]))
     if figures:
         from ..report.figures import overlay_figure, pareto_figure
 

@@ -1,0 +1,659 @@
+"""Point cloud formats (.pcd, .ply), camera models (fisheye, ROS camera_info) and the exports of
+the chosen extrinsic (KITTI calib_velo_to_cam.txt, ROS tf_static.yaml, extrinsic_inverse.yaml)."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from pypcd4 import Encoding, PointCloud
+from scipy.spatial.transform import Rotation
+
+from paretocal.camera import project
+from paretocal.errors import InputError
+from paretocal.geometry import apply_correction, invert
+from paretocal.io import detect_source, load_frames, read_extrinsic
+from paretocal.io.exports import (INVERSE_FILE, KITTI_FILE, TF_FILE, kitti_rect_of,
+                                  read_extrinsic_inverse, read_kitti_velo_to_cam, read_tf_static,
+                                  write_exports)
+from paretocal.io.readers import read_kitti_calib, read_points
+from paretocal.io.results import write_run
+
+# --- writers used by the tests (independent of the readers under test) ---------------------------
+
+_PCD_TYPE = {"f": "F", "u": "U", "i": "I"}
+
+
+def pcd_bytes(cols: list[tuple[str, np.ndarray]], data: str = "binary", width=None,
+              height: int = 1) -> bytes:
+    """A PCD file written by hand: one field per column, little endian, PCL's header order."""
+    n = len(cols[0][1])
+    arr = np.zeros(n, dtype=[(f"c{j}", "<" + c.dtype.str[1:]) for j, (_, c) in enumerate(cols)])
+    for j, (_, c) in enumerate(cols):
+        arr[f"c{j}"] = c
+    width = n if width is None else width
+    head = ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+            f"FIELDS {' '.join(name for name, _ in cols)}\n"
+            f"SIZE {' '.join(str(c.dtype.itemsize) for _, c in cols)}\n"
+            f"TYPE {' '.join(_PCD_TYPE[c.dtype.kind] for _, c in cols)}\n"
+            f"COUNT {' '.join('1' for _ in cols)}\n"
+            f"WIDTH {width}\nHEIGHT {height}\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n")
+    if data == "ascii":
+        body = "".join(" ".join(f"{v:.9g}" for v in row) + "\n" for row in arr.tolist())
+        return (head + body).encode()
+    return head.encode() + arr.tobytes()
+
+
+_PLY_TYPE = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i4": "int"}
+
+
+def ply_bytes(cols: list[tuple[str, np.ndarray]], fmt: str = "binary_little_endian",
+              face: bool = False, before: bool = False) -> bytes:
+    """A PLY file written by hand: a vertex element, optionally a face element after it and (ascii)
+    a 'camera' element with a list property before it."""
+    n = len(cols[0][1])
+    endian = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "<"}[fmt]
+    arr = np.zeros(n, dtype=[(name, endian + c.dtype.str[1:]) for name, c in cols])
+    for name, c in cols:
+        arr[name] = c
+    head = ["ply", f"format {fmt} 1.0", "comment written by test_formats"]
+    if before:
+        head += ["element camera 2", "property list uchar float params"]
+    head += [f"element vertex {n}"] + [f"property {_PLY_TYPE[c.dtype.str[1:]]} {name}"
+                                        for name, c in cols]
+    if face:
+        head += ["element face 1", "property list uchar int vertex_indices"]
+    head.append("end_header")
+    text = "\n".join(head) + "\n"
+    if fmt == "ascii":
+        pre = "3 1 2 3\n0\n" if before else ""
+        body = "".join(" ".join(f"{v:.9g}" for v in row) + "\n" for row in arr.tolist())
+        return (text + pre + body + ("3 0 1 2\n" if face else "")).encode()
+    tail = b""
+    if face:
+        tail = np.array([3], endian + "u1").tobytes() + np.array([0, 1, 2], endian + "i4").tobytes()
+    return text.encode() + arr.tobytes() + tail
+
+
+def xyzi_cols(points, intensity: str | None = "intensity"):
+    cols = [(c, np.ascontiguousarray(points[:, j])) for j, c in enumerate("xyz")]
+    if intensity:
+        cols.append((intensity, np.ascontiguousarray(points[:, 3])))
+    return cols
+
+
+def no_intensity(points):
+    out = points.copy()
+    out[:, 3] = 0
+    return out
+
+
+def err_for(path, what):
+    """A match pattern for an InputError that names ``path`` and says ``what``."""
+    return re.escape(str(path)) + ".*" + what
+
+
+@pytest.fixture(scope="module")
+def pts(raw_frames):
+    """The points of a real KITTI frame."""
+    return raw_frames[0].points
+
+
+# --- point clouds ------------------------------------------------------------------------------
+
+
+class TestPcd:
+    @pytest.mark.parametrize("encoding", [Encoding.ASCII, Encoding.BINARY,
+                                          Encoding.BINARY_COMPRESSED])
+    @pytest.mark.parametrize("with_intensity", [True, False])
+    def test_pypcd4_files_round_trip_a_real_frame(self, tmp_path, pts, encoding, with_intensity):
+        if encoding == Encoding.ASCII:
+            pts = pts[::8]                  # formatting text is slow: a subset keeps it fast
+        pc = (PointCloud.from_xyzi_points(pts) if with_intensity
+              else PointCloud.from_xyz_points(pts[:, :3]))
+        p = tmp_path / "frame.pcd"
+        pc.save(p, encoding)
+        if encoding == Encoding.BINARY_COMPRESSED:
+            assert b"DATA binary_compressed" in p.read_bytes()[:400]
+        got = read_points(p)
+        assert got.dtype == np.float32 and got.shape == pts.shape
+        np.testing.assert_array_equal(got, pts if with_intensity else no_intensity(pts))
+
+    @pytest.mark.parametrize("name", ["intensity", "i", "reflectance", "Intensity"])
+    def test_intensity_field_names_and_other_fields(self, tmp_path, pts, name):
+        sub = pts[::50]
+        ring = (np.arange(len(sub)) % 64).astype(np.uint16)
+        cols = [("ring", ring)] + xyzi_cols(sub, None) + [("t", np.zeros(len(sub), np.float64)),
+                                                          (name, sub[:, 3].copy())]
+        p = tmp_path / "a.pcd"
+        p.write_bytes(pcd_bytes(cols, "binary"))
+        np.testing.assert_array_equal(read_points(p), sub)
+
+    def test_uint8_intensity_and_float64_coordinates(self, tmp_path, pts):
+        sub = pts[::50]
+        inten = (np.arange(len(sub)) % 256).astype(np.uint8)
+        cols = [(c, sub[:, j].astype(np.float64)) for j, c in enumerate("xyz")]
+        p = tmp_path / "a.pcd"
+        p.write_bytes(pcd_bytes(cols + [("intensity", inten)], "binary"))
+        got = read_points(p)
+        np.testing.assert_array_equal(got[:, :3], sub[:, :3])
+        np.testing.assert_array_equal(got[:, 3], inten.astype(np.float32))
+
+    def test_ascii_tolerates_tabs_trailing_blanks_and_header_comments(self, tmp_path):
+        text = ("# .PCD v0.7\nVERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+                "WIDTH 3\nHEIGHT 1\n# a comment\nPOINTS 3\nDATA ascii\n"
+                "1 2 3 \n4\t5   6\r\n7 8 9\n")
+        p = tmp_path / "a.pcd"
+        p.write_text(text)
+        np.testing.assert_array_equal(read_points(p),
+                                      [[1, 2, 3, 0], [4, 5, 6, 0], [7, 8, 9, 0]])
+
+    def test_nan_points_of_an_organised_cloud_are_dropped_like_bin(self, tmp_path, caplog):
+        xyz = np.arange(30, dtype=np.float32).reshape(10, 3)
+        xyz[2] = np.nan
+        xyz[7, 1] = np.inf
+        inten = np.ones(10, np.float32)
+        inten[4] = np.nan
+        p = tmp_path / "a.pcd"
+        cols = [(c, xyz[:, j].copy()) for j, c in enumerate("xyz")] + [("intensity", inten)]
+        p.write_bytes(pcd_bytes(cols, "binary", width=5, height=2))
+        got = read_points(p)
+        assert len(got) == 8 and "dropped 2 points" in caplog.text
+        assert got[3, 3] == 0.0                       # the NaN intensity (row 4) reads as zero
+        # The same cloud as a KITTI .bin gives the same points.
+        b = tmp_path / "a.bin"
+        np.column_stack([xyz, inten]).astype(np.float32).tofile(b)
+        np.testing.assert_array_equal(read_points(b), got)
+
+    def _good(self, pts):
+        return pcd_bytes(xyzi_cols(pts[:100]), "binary")
+
+    @pytest.mark.parametrize("make, what", [
+        (lambda g: g[:-10], "truncated"),
+        (lambda g: g.replace(b"FIELDS x y z intensity", b"FIELDS x y q intensity"),
+         "no 'z' field"),
+        (lambda g: g.replace(b"DATA binary\n", b"DAT binary\n"), "no 'DATA' line"),
+        (lambda g: b"ply\nformat ascii 1.0\n" + g, "not a PCD file"),
+        (lambda g: g.replace(b"WIDTH 100", b"WIDTH 99"), "WIDTH 99 x HEIGHT 1 but POINTS 100"),
+        (lambda g: g.replace(b"TYPE F F F F", b"TYPE F F F"), "TYPE has 3 entries for 4 FIELDS"),
+        (lambda g: g.replace(b"SIZE 4 4 4 4", b"SIZE 4 4 3 4"), "unsupported TYPE F SIZE 3"),
+        (lambda g: g.replace(b"DATA binary", b"DATA binary_lzma"), "DATA 'binary_lzma'"),
+        (lambda g: g.replace(b"POINTS 100", b"POINTS many"), "POINTS must be"),
+    ])
+    def test_malformed_binary(self, tmp_path, pts, make, what):
+        p = tmp_path / "bad.pcd"
+        p.write_bytes(make(self._good(pts)))
+        with pytest.raises(InputError, match=err_for(p, what)):
+            read_points(p)
+
+    def test_malformed_ascii(self, tmp_path, pts):
+        good = pcd_bytes(xyzi_cols(pts[:20]), "ascii")
+        p = tmp_path / "bad.pcd"
+        p.write_bytes(good.rsplit(b"\n", 3)[0] + b"\n")          # two rows short
+        with pytest.raises(InputError, match=err_for(p, "18 rows .* POINTS 20")):
+            read_points(p)
+        head, _, body = good.partition(b"DATA ascii\n")
+        rows = body.split(b"\n")
+        rows[3] += b" 1.5"                                        # an extra value in row 3
+        p.write_bytes(head + b"DATA ascii\n" + b"\n".join(rows))
+        with pytest.raises(InputError, match=err_for(p, "cannot be parsed")):
+            read_points(p)
+
+    def test_corrupt_compressed(self, tmp_path, pts):
+        p = tmp_path / "c.pcd"
+        PointCloud.from_xyzi_points(pts[:2000]).save(p, Encoding.BINARY_COMPRESSED)
+        raw = p.read_bytes()
+        p.write_bytes(raw[: len(raw) - 200])
+        with pytest.raises(InputError, match=err_for(p, "binary_compressed data cannot be decoded")):
+            read_points(p)
+
+
+class TestPly:
+    @pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian", "ascii"])
+    def test_real_frame_round_trip(self, tmp_path, pts, fmt):
+        if fmt == "ascii":
+            pts = pts[::8]
+        p = tmp_path / "frame.ply"
+        p.write_bytes(ply_bytes(xyzi_cols(pts), fmt, face=True))
+        got = read_points(p)
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, pts)
+
+    def test_no_intensity_double_coordinates(self, tmp_path, pts):
+        cols = [(c, pts[:, j].astype(np.float64)) for j, c in enumerate("xyz")]
+        p = tmp_path / "a.ply"
+        p.write_bytes(ply_bytes(cols))
+        np.testing.assert_array_equal(read_points(p), no_intensity(pts))
+
+    def test_uchar_reflectance_and_an_element_before_the_vertices(self, tmp_path, pts):
+        sub = pts[::100]
+        refl = (np.arange(len(sub)) % 200).astype(np.uint8)
+        p = tmp_path / "a.ply"
+        p.write_bytes(ply_bytes(xyzi_cols(sub, None) + [("reflectance", refl)], "ascii",
+                                face=True, before=True))
+        got = read_points(p)
+        np.testing.assert_array_equal(got[:, :3], sub[:, :3])
+        np.testing.assert_array_equal(got[:, 3], refl)
+
+    @pytest.mark.parametrize("make, what", [
+        (lambda g: g[:-7], "truncated"),
+        (lambda g: g.replace(b"ply\n", b"plx\n", 1), "not a PLY file"),
+        (lambda g: g.replace(b"property float x", b"property float u"), "no 'x' field"),
+        (lambda g: g.replace(b"end_header", b"end_hdr"), "no 'end_header'"),
+        (lambda g: g.replace(b"binary_little_endian", b"binary_middle_endian"),
+         "unsupported PLY format"),
+        (lambda g: g.replace(b"property float z", b"property list uchar float z"), "is a list"),
+        (lambda g: g.replace(b"element vertex 50", b"element vertex fifty"), "malformed PLY header"),
+        (lambda g: g.replace(b"property float y", b"property float32x y"), "unknown type"),
+    ])
+    def test_malformed(self, tmp_path, pts, make, what):
+        p = tmp_path / "bad.ply"
+        p.write_bytes(make(ply_bytes(xyzi_cols(pts[:50]))))
+        with pytest.raises(InputError, match=err_for(p, what)):
+            read_points(p)
+
+    def test_truncated_ascii(self, tmp_path, pts):
+        p = tmp_path / "bad.ply"
+        p.write_bytes(ply_bytes(xyzi_cols(pts[:50]), "ascii")[:-40])
+        with pytest.raises(InputError, match=err_for(p, "(truncated|cannot be parsed)")):
+            read_points(p)
+
+
+# --- generic folders ---------------------------------------------------------------------------
+
+
+def generic_folder(root, frames, point_writer, camera=None, extra=None):
+    """A generic-layout folder built from real frames with the given point cloud writer."""
+    (root / "images").mkdir(parents=True)
+    (root / "points").mkdir()
+    f0 = frames[0]
+    calib = {"camera": camera or {"K": f0.camera.K.tolist(), "width": f0.camera.width,
+                                  "height": f0.camera.height},
+             "T_cam_lidar": f0.T_ref.tolist()}
+    calib.update(extra or {})
+    (root / "calib.yaml").write_text(yaml.safe_dump(calib))
+    for f in frames:
+        cv2.imwrite(str(root / "images" / f"{f.name}.png"), f.image)
+        point_writer(root / "points", f)
+    return root
+
+
+class TestGenericFolder:
+    def test_kitti_frames_as_pcd_and_ply_load_like_the_originals(self, tmp_path, raw_frames):
+        frames = raw_frames[:3]
+
+        def writer(folder, f):
+            if f is frames[1]:
+                (folder / f"{f.name}.ply").write_bytes(ply_bytes(xyzi_cols(f.points)))
+            else:
+                enc = Encoding.BINARY_COMPRESSED if f is frames[0] else Encoding.BINARY
+                PointCloud.from_xyzi_points(f.points).save(folder / f"{f.name}.pcd", enc)
+
+        root = generic_folder(tmp_path / "rig", frames, writer)
+        assert detect_source(root).layout == "folder"
+        got = load_frames(root)
+        assert [f.name for f in got] == [f.name for f in frames]
+        for a, b in zip(got, frames):
+            np.testing.assert_array_equal(a.points, b.points)
+            np.testing.assert_array_equal(a.camera.K, b.camera.K)
+            assert (a.camera.width, a.camera.height) == (b.camera.width, b.camera.height)
+            np.testing.assert_allclose(a.T_ref, b.T_ref, atol=1e-12)
+            np.testing.assert_array_equal(a.image, b.image)
+            assert a.kitti_rect is None and b.kitti_rect is not None
+        assert got[0].points_path.suffix == ".pcd" and got[1].points_path.suffix == ".ply"
+
+    def test_bad_point_file_in_a_folder_names_it(self, tmp_path, raw_frames):
+        def writer(folder, f):
+            (folder / f"{f.name}.pcd").write_bytes(b"VERSION 0.7\nFIELDS x y\n")
+
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], writer)
+        with pytest.raises(InputError, match=err_for(root / "points" / raw_frames[0].name, "DATA")):
+            load_frames(root)
+
+
+# --- cameras ---------------------------------------------------------------------------------
+
+
+def _blob_centroids(gray: np.ndarray) -> np.ndarray:
+    n, labels = cv2.connectedComponents((gray > 20).astype(np.uint8))
+    v, u = np.mgrid[: gray.shape[0], : gray.shape[1]]
+    w = gray.astype(np.float64)
+    out = []
+    for k in range(1, n):
+        m = labels == k
+        out.append([(w[m] * u[m]).sum() / w[m].sum(), (w[m] * v[m]).sum() / w[m].sum()])
+    return np.array(out)
+
+
+class TestFisheye:
+    W, H = 640, 480
+    K = np.array([[300.0, 0, 319.5], [0, 300.0, 239.5], [0, 0, 1]])
+    D = [0.08, -0.03, 0.01, -0.002]
+
+    def scene(self, rng):
+        """Points (LiDAR frame), their camera-frame copy and the extrinsic."""
+        gx, gy = np.meshgrid(np.linspace(-0.6, 0.6, 5), np.linspace(-0.45, 0.45, 5))
+        z = rng.uniform(2.0, 10.0, gx.size)
+        p_cam = np.column_stack([gx.ravel() * z, gy.ravel() * z, z])
+        T = np.eye(4)
+        T[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]     # KITTI-like LiDAR axes
+        T = apply_correction(T, np.array([0.1, -0.05, 0.2, 3.0, -2.0, 1.5]))
+        p_lidar = (invert(T) @ np.column_stack([p_cam, np.ones(len(p_cam))]).T).T[:, :3]
+        return p_lidar, p_cam, T
+
+    def render(self, p_cam):
+        """A distorted fisheye image with a Gaussian dot at each point's projection."""
+        uv, _ = cv2.fisheye.projectPoints(p_cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                                          self.K, np.array(self.D))
+        uv = uv.reshape(-1, 2)
+        img = np.zeros((self.H, self.W))
+        for a, b in uv:                          # each dot drawn within 6 px (5 sigma)
+            u0, v0 = int(a) - 6, int(b) - 6
+            v, u = np.mgrid[v0: v0 + 14, u0: u0 + 14]
+            img[v0: v0 + 14, u0: u0 + 14] += 255 * np.exp(-((u - a) ** 2 + (v - b) ** 2)
+                                                          / (2 * 1.2 ** 2))
+        return np.clip(img, 0, 255).astype(np.uint8), uv
+
+    def folder(self, tmp_path, rng, camera_extra):
+        p_lidar, p_cam, T = self.scene(rng)
+        img, uv_fisheye = self.render(p_cam)
+        root = tmp_path / "fish"
+        (root / "images").mkdir(parents=True)
+        (root / "points").mkdir()
+        cv2.imwrite(str(root / "images" / "000000.png"), img)
+        pts = np.column_stack([p_lidar, np.ones(len(p_lidar))]).astype(np.float32)
+        PointCloud.from_xyzi_points(pts).save(root / "points" / "000000.pcd", Encoding.BINARY)
+        camera = {"K": self.K.tolist(), "width": self.W, "height": self.H, **camera_extra}
+        (root / "calib.yaml").write_text(yaml.safe_dump({"camera": camera,
+                                                         "T_cam_lidar": T.tolist()}))
+        return root, uv_fisheye, img
+
+    @pytest.mark.parametrize("model", ["fisheye", "equidistant"])
+    def test_undistorted_dots_land_on_the_pinhole_projection(self, tmp_path, rng, model):
+        root, uv_fisheye, raw = self.folder(tmp_path, rng, {"model": model, "D": self.D})
+        (frame,) = load_frames(root)
+        np.testing.assert_array_equal(frame.camera.K, self.K)
+        uv, _, visible = project(frame.points, frame.camera, frame.T_ref)
+        assert visible.all()
+        # The distorted dots are far from where a pinhole camera puts them...
+        assert np.abs(uv_fisheye - uv).max() > 20
+        # ... and the loaded (undistorted) image has them where it does, within a pixel.
+        found = _blob_centroids(frame.image[:, :, 0])
+        assert len(found) == len(uv)
+        d = np.linalg.norm(found[:, None] - uv[None], axis=2).min(axis=0)
+        assert d.max() < 1.0, d
+        # Read as a pinhole image without distortion, the dots stay where the lens put them.
+        assert np.linalg.norm(_blob_centroids(raw)[:, None] - uv[None], axis=2).min(0).max() > 20
+
+    def test_fisheye_needs_four_coefficients(self, tmp_path, rng):
+        root, _, _ = self.folder(tmp_path, rng, {"model": "fisheye", "D": self.D + [0.0]})
+        with pytest.raises(InputError, match=err_for(root / "calib.yaml", "camera.D .*4 fisheye")):
+            detect_source(root)
+
+    def test_unknown_model(self, tmp_path, rng):
+        root, _, _ = self.folder(tmp_path, rng, {"model": "omnidir"})
+        with pytest.raises(InputError, match=err_for(root / "calib.yaml", "camera.model 'omnidir'")):
+            detect_source(root)
+
+
+def _ros_matrix(rows, cols, data):
+    return {"rows": rows, "cols": cols, "data": [float(v) for v in np.ravel(data)]}
+
+
+def camera_info(frame, D, model="plumb_bob"):
+    return {"image_width": frame.camera.width, "image_height": frame.camera.height,
+            "camera_name": "kitti_cam_02",
+            "camera_matrix": _ros_matrix(3, 3, frame.camera.K),
+            "distortion_model": model,
+            "distortion_coefficients": _ros_matrix(1, len(D), D),
+            "rectification_matrix": _ros_matrix(3, 3, np.eye(3)),
+            "projection_matrix": _ros_matrix(3, 4, np.column_stack([frame.camera.K, np.zeros(3)]))}
+
+
+def write_points_bin(folder, f):
+    f.points.tofile(folder / f"{f.name}.bin")
+
+
+class TestCameraInfo:
+    D = [-0.3, 0.1, 0.001, 0.0005, 0.02]
+
+    def test_plumb_bob_matches_the_equivalent_calib_yaml(self, tmp_path, raw_frames):
+        f = raw_frames[:1]
+        cam = {"K": f[0].camera.K.tolist(), "width": f[0].camera.width,
+               "height": f[0].camera.height, "D": self.D}
+        plain = generic_folder(tmp_path / "plain", f, write_points_bin, camera=cam)
+        by_file = generic_folder(tmp_path / "file", f, write_points_bin,
+                                 extra={"camera_info": "intrinsics/cam.yaml"})
+        calib = yaml.safe_load((by_file / "calib.yaml").read_text())
+        del calib["camera"]
+        (by_file / "calib.yaml").write_text(yaml.safe_dump(calib))
+        (by_file / "intrinsics").mkdir()
+        (by_file / "intrinsics" / "cam.yaml").write_text(
+            yaml.safe_dump(camera_info(f[0], self.D), sort_keys=False))
+        inline = generic_folder(tmp_path / "inline", f, write_points_bin,
+                                camera=camera_info(f[0], self.D))
+        a, b, c = (detect_source(r).frames[0] for r in (plain, by_file, inline))
+        for other in (b, c):
+            np.testing.assert_array_equal(other.camera.K, a.camera.K)
+            assert (other.camera.width, other.camera.height) == (a.camera.width, a.camera.height)
+            np.testing.assert_array_equal(other.dist, a.dist)
+            assert other.dist_model == a.dist_model == "pinhole"
+        images = [load_frames(r)[0].image for r in (plain, by_file, inline)]
+        np.testing.assert_array_equal(images[1], images[0])
+        np.testing.assert_array_equal(images[2], images[0])
+        assert not np.array_equal(images[0], f[0].image)          # it was undistorted
+
+    def test_equidistant_and_rational_polynomial(self, tmp_path, raw_frames):
+        f = raw_frames[:1]
+        root = generic_folder(tmp_path / "eq", f, write_points_bin,
+                              camera=camera_info(f[0], [0.1, 0.01, 0, 0], "equidistant"))
+        fr = detect_source(root).frames[0]
+        assert fr.dist_model == "fisheye" and fr.dist.tolist() == [0.1, 0.01, 0, 0]
+        root = generic_folder(tmp_path / "rp", f, write_points_bin,
+                              camera=camera_info(f[0], [0.1, 0.01, 0, 0, 0, 0.2, 0, 0],
+                                                 "rational_polynomial"))
+        fr = detect_source(root).frames[0]
+        assert fr.dist_model == "pinhole" and fr.dist.size == 8
+
+    @pytest.mark.parametrize("edit, what", [
+        (lambda c: c["camera_matrix"].update(data=[1.0] * 8), r"camera_matrix\.data has 8 values"),
+        (lambda c: c["camera_matrix"].update(rows=1, cols=9), "camera_matrix must be 3 x 3"),
+        (lambda c: c["distortion_coefficients"]["data"].__setitem__(1, float("nan")),
+         "distortion_coefficients contains NaN"),
+        (lambda c: c.update(distortion_model="kannala"), "distortion_model 'kannala'"),
+        (lambda c: c.update(distortion_model="equidistant"), "4 fisheye"),
+        (lambda c: c.pop("image_height"), "missing image_height"),
+        (lambda c: c.pop("distortion_model"), "distortion_model is missing"),
+    ])
+    def test_malformed_camera_info_names_file_and_key(self, tmp_path, raw_frames, edit, what):
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin,
+                              extra={"camera_info": "cam.yaml"})
+        calib = yaml.safe_load((root / "calib.yaml").read_text())
+        del calib["camera"]
+        (root / "calib.yaml").write_text(yaml.safe_dump(calib))
+        info = camera_info(raw_frames[0], self.D)
+        edit(info)
+        (root / "cam.yaml").write_text(yaml.safe_dump(info))
+        with pytest.raises(InputError, match=err_for(root / "cam.yaml", what)):
+            detect_source(root)
+
+    def test_inline_errors_name_the_camera_section(self, tmp_path, raw_frames):
+        info = camera_info(raw_frames[0], self.D)
+        info["camera_matrix"]["data"][0] = float("inf")
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin, camera=info)
+        with pytest.raises(InputError, match=err_for(root / "calib.yaml",
+                                                     "camera.camera_matrix contains NaN")):
+            detect_source(root)
+
+    def test_missing_file_and_both_sources(self, tmp_path, raw_frames):
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin,
+                              extra={"camera_info": "nope.yaml"})
+        with pytest.raises(InputError, match="either 'camera' or 'camera_info'"):
+            detect_source(root)
+        calib = yaml.safe_load((root / "calib.yaml").read_text())
+        del calib["camera"]
+        (root / "calib.yaml").write_text(yaml.safe_dump(calib))
+        with pytest.raises(InputError, match=err_for(root / "calib.yaml", "nope.yaml not found")):
+            detect_source(root)
+
+
+# --- exports of the chosen extrinsic ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def T_est(raw_frames):
+    """A calibration result: KITTI's reference moved by a few centimetres and degrees."""
+    return apply_correction(raw_frames[0].T_ref, np.array([0.05, -0.03, 0.08, 1.5, -0.8, 0.6]))
+
+
+def kitti_copy(raw_date, dst, velo_to_cam_text):
+    """A KITTI raw date folder with the given calib_velo_to_cam.txt; returns the drive folder."""
+    dst.mkdir(parents=True)
+    (dst / "calib_cam_to_cam.txt").write_text((raw_date / "calib_cam_to_cam.txt").read_text())
+    (dst / "calib_velo_to_cam.txt").write_text(velo_to_cam_text)
+    drive = next(p for p in raw_date.iterdir() if p.name.endswith("_sync"))
+    (dst / drive.name).symlink_to(drive.resolve(), target_is_directory=True)
+    return dst / drive.name
+
+
+class TestKittiExport:
+    def test_kitti_raw_source_writes_tr_that_kitti_tools_turn_back_into_T(
+            self, tmp_path, raw_date, raw_frames, T_est):
+        rect = kitti_rect_of(raw_frames)
+        assert rect is not None
+        (path,) = [p for p in write_exports(tmp_path, T_est, rect, "9.9") if p.name == KITTI_FILE]
+        text = path.read_text()
+        assert text.startswith("calib_time: ") and "Tr_velo_to_cam" in text
+        assert [line.split(":")[0] for line in text.splitlines()] == ["calib_time", "R", "T"]
+        Tr = read_kitti_velo_to_cam(path)
+        # KITTI's own arithmetic: P_rect_02 @ R_rect_00 @ Tr is the projection of T_cam_lidar.
+        c2c = read_kitti_calib(raw_date / "calib_cam_to_cam.txt")
+        R0 = np.eye(4)
+        R0[:3, :3] = c2c["R_rect_00"].reshape(3, 3)
+        P = c2c["P_rect_02"].reshape(3, 4) @ R0 @ Tr
+        np.testing.assert_allclose(P, raw_frames[0].camera.K @ T_est[:3], rtol=1e-12, atol=1e-9)
+        # And paretocal's KITTI loader reads the file back as the same extrinsic.
+        drive = kitti_copy(raw_date, tmp_path / "copy" / raw_date.name, text)
+        np.testing.assert_allclose(detect_source(drive).frames[0].T_ref, T_est, atol=1e-9)
+        assert not np.allclose(Tr, T_est, atol=1e-3)       # it is not T_cam_lidar itself
+
+    def test_exporting_the_reference_reproduces_kittis_own_file(self, tmp_path, raw_date,
+                                                                raw_frames):
+        write_exports(tmp_path, raw_frames[0].T_ref, kitti_rect_of(raw_frames))
+        ours = read_kitti_velo_to_cam(tmp_path / KITTI_FILE)
+        theirs = read_kitti_calib(raw_date / "calib_velo_to_cam.txt")
+        np.testing.assert_allclose(ours[:3, :3].ravel(), theirs["R"], atol=2e-6)
+        np.testing.assert_allclose(ours[:3, 3], theirs["T"], atol=2e-6)
+
+    def test_generic_source_writes_T_itself_and_says_so(self, tmp_path, raw_frames, T_est):
+        root = generic_folder(tmp_path / "rig", raw_frames[:2], write_points_bin)
+        frames = load_frames(root)
+        assert kitti_rect_of(frames) is None
+        write_exports(tmp_path / "out", T_est, kitti_rect_of(frames))
+        text = (tmp_path / "out" / KITTI_FILE).read_text()
+        assert "T_cam_lidar itself" in text.splitlines()[0]
+        np.testing.assert_allclose(read_kitti_velo_to_cam(tmp_path / "out" / KITTI_FILE), T_est,
+                                   atol=1e-12)
+
+    def test_kitti_rect_needs_every_frame_to_agree(self, raw_frames):
+        a, b = SimpleNamespace(kitti_rect=np.eye(4)), SimpleNamespace(kitti_rect=2 * np.eye(4))
+        assert kitti_rect_of(None) is None and kitti_rect_of([]) is None
+        assert kitti_rect_of([a, b]) is None
+        assert kitti_rect_of([a, SimpleNamespace(kitti_rect=None)]) is None
+        np.testing.assert_array_equal(kitti_rect_of([a, a]), np.eye(4))
+
+    def test_bad_kitti_file(self, tmp_path):
+        p = tmp_path / KITTI_FILE
+        p.write_text("calib_time: x\nR: 1 0 0 0 1 0 0 0\nT: 0 0 0\n")
+        with pytest.raises(InputError, match=err_for(p, "'R' has 8 values")):
+            read_kitti_velo_to_cam(p)
+
+
+class TestTfStatic:
+    def test_round_trip_and_direction(self, tmp_path, T_est):
+        write_exports(tmp_path, T_est)
+        T, parent, child = read_tf_static(tmp_path / TF_FILE)
+        assert (parent, child) == ("camera", "lidar")
+        np.testing.assert_allclose(T, T_est, atol=1e-12)
+        doc = yaml.safe_load((tmp_path / TF_FILE).read_text())
+        tf = doc["transforms"][0]["transform"]
+        q = [tf["rotation"][k] for k in "xyzw"]
+        ref = Rotation.from_matrix(T_est[:3, :3]).as_quat()
+        np.testing.assert_allclose(np.abs(np.dot(q, ref)), 1.0, atol=1e-12)   # same up to sign
+        assert q[3] >= 0
+        # TF semantics: the transform from parent 'camera' to child 'lidar' carries LiDAR
+        # coordinates into camera coordinates, exactly as T_cam_lidar does.
+        p_lidar = np.array([12.0, -3.0, 0.5])
+        t = [tf["translation"][k] for k in "xyz"]
+        np.testing.assert_allclose(Rotation.from_quat(q).apply(p_lidar) + t,
+                                   T_est[:3, :3] @ p_lidar + T_est[:3, 3], atol=1e-9)
+        assert "T_cam_lidar" in doc["direction"]
+
+    def test_static_transform_publisher_line_gives_the_same_transform(self, tmp_path, T_est):
+        write_exports(tmp_path, T_est, parent="cam_front_optical", child="velodyne")
+        line = yaml.safe_load((tmp_path / TF_FILE).read_text())["static_transform_publisher"]
+        words = shlex.split(line)
+        assert words[:4] == ["ros2", "run", "tf2_ros", "static_transform_publisher"]
+        args = dict(zip(words[4::2], words[5::2]))
+        assert args["--frame-id"] == "cam_front_optical" and args["--child-frame-id"] == "velodyne"
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_quat([float(args[f"--q{k}"]) for k in "xyzw"]).as_matrix()
+        T[:3, 3] = [float(args[f"--{k}"]) for k in "xyz"]
+        np.testing.assert_allclose(T, T_est, atol=1e-9)
+
+    @pytest.mark.parametrize("edit, what", [
+        (lambda d: d["transforms"][0]["transform"].pop("rotation"), "rotation"),
+        (lambda d: d["transforms"][0]["transform"]["rotation"].update(w=3.0), "not a unit"),
+        (lambda d: d.pop("transforms"), "missing key 'transforms'"),
+    ])
+    def test_malformed(self, tmp_path, T_est, edit, what):
+        write_exports(tmp_path, T_est)
+        doc = yaml.safe_load((tmp_path / TF_FILE).read_text())
+        edit(doc)
+        (tmp_path / TF_FILE).write_text(yaml.safe_dump(doc))
+        with pytest.raises(InputError, match=err_for(tmp_path / TF_FILE, what)):
+            read_tf_static(tmp_path / TF_FILE)
+
+
+class TestInverse:
+    def test_inverse_times_T_is_identity(self, tmp_path, T_est):
+        write_exports(tmp_path, T_est)
+        Ti = read_extrinsic_inverse(tmp_path / INVERSE_FILE)
+        np.testing.assert_allclose(Ti @ T_est, np.eye(4), atol=1e-12)
+        np.testing.assert_allclose(T_est @ Ti, np.eye(4), atol=1e-12)
+        text = (tmp_path / INVERSE_FILE).read_text()
+        assert "CAMERA frame into the LIDAR frame" in text
+        # It can never be mistaken for an --init file.
+        with pytest.raises(InputError, match="missing key 'T_cam_lidar'"):
+            read_extrinsic(tmp_path / INVERSE_FILE)
+
+
+class TestWriteRun:
+    def _result(self, T):
+        front = SimpleNamespace(X=np.array([[0.0] * 6 + [500.0]]), F=np.array([[1.0, 0.5]]),
+                                columns={"t_norm": [0.1], "m_norm": [0.2], "ms": [3.0],
+                                         "bytes": [1000.0]})
+        return SimpleNamespace(T_cam_lidar=T, front=front, chosen=0, n_points=500,
+                               decision={"rule": "knee"},
+                               to_dict=lambda: {"T_cam_lidar": T.tolist(), "version": "0.test"})
+
+    def test_every_run_directory_gets_the_exports(self, tmp_path, raw_frames, T_est):
+        out = tmp_path / "run"
+        written = write_run(self._result(T_est), out, raw_frames[:2], figures=False)
+        for name in (KITTI_FILE, TF_FILE, INVERSE_FILE):
+            assert out / name in written and (out / name).stat().st_size > 0
+        assert "paretocal 0.test" in (out / KITTI_FILE).read_text()
+        np.testing.assert_allclose(raw_frames[0].kitti_rect @ read_kitti_velo_to_cam(out / KITTI_FILE),
+                                   T_est, atol=1e-9)
+        np.testing.assert_allclose(read_tf_static(out / TF_FILE)[0], T_est, atol=1e-12)
+        assert not list(out.glob(".*tmp*"))
+
+    def test_without_frames_the_kitti_file_holds_T(self, tmp_path, T_est):
+        write_run(self._result(T_est), tmp_path, None, figures=False)
+        np.testing.assert_allclose(read_kitti_velo_to_cam(tmp_path / KITTI_FILE), T_est,
+                                   atol=1e-12)
