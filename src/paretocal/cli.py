@@ -291,6 +291,38 @@ def study(
                f"wrote {out / 'report.html'}")
 
 
+@app.command()
+def depth(
+    source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
+    out: Annotated[Path, typer.Option("--out", help="Directory for the depth maps.")],
+    extrinsic: Annotated[Optional[Path], typer.Option(
+        help="T_cam_lidar to project with (YAML/JSON); default: the dataset's.")] = None,
+    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
+    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+    max_depth: Annotated[float, typer.Option("--max-depth", help="Colour scale of the "
+                                                                 "overlays (m).")] = 50.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+) -> None:
+    """Write per frame the sparse depth map: <stem>.png (KITTI depth benchmark: uint16, metres x
+    256, 0 = no return), <stem>.npy (float32 metres) and <stem>_overlay.png."""
+    from .depth import write_depth
+    from .io import load_frames, read_extrinsic
+
+    _setup_logging(False, quiet)
+    if max_depth <= 0:
+        raise SettingsError("--max-depth must be positive")
+    loaded = load_frames(source, frames, camera)
+    T = read_extrinsic(extrinsic) if extrinsic is not None else loaded[0].T_ref
+    if T is None:
+        raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
+    interactive = sys.stderr.isatty() and not quiet
+    with _Progress(interactive) as progress:
+        for k, f in enumerate(loaded):
+            write_depth(f, T, out, max_depth=max_depth)
+            progress("depth maps", k + 1, len(loaded))
+    typer.echo(f"paretocal: wrote {len(loaded)} depth maps to {out}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status."""
     args = sys.argv[1:] if argv is None else list(argv)
