@@ -7,10 +7,16 @@ best solution within a time budget) is chosen from the resulting Pareto front.
 
 Quick use::
 
-    from paretocal import calibrate, load_frames, read_extrinsic
-    frames = load_frames("path/to/2011_09_26_drive_0001_sync")
+    from paretocal import calibrate, load_frames, read_extrinsic, write_run
+    frames = load_frames("path/to/2011_09_26_drive_0001_sync", frames="0:20")
     result = calibrate(frames, T_init=read_extrinsic("init.yaml"))
-    print(result.T_cam_lidar, result.reference_error)
+    print(result.T_cam_lidar, result.n_points, result.reference_error)
+    write_run(result, "runs/0001", frames)          # the files `paretocal calibrate` writes
+
+The other commands have their functions too: :func:`check_extrinsic` (``paretocal check``),
+:func:`run_study` (``paretocal study``), :func:`write_depth` / :func:`depth_map`
+(``paretocal depth``). Every array is numpy; transforms are 4x4 ``T_cam_lidar`` (LiDAR ->
+camera, metres); angles in files and results are degrees.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -20,10 +26,15 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0"
 
+from .check import check_extrinsic  # noqa: E402
 from .config import Settings, load_settings  # noqa: E402
+from .depth import depth_map, write_depth  # noqa: E402
 from .errors import ParetocalError  # noqa: E402
 from .io import load_frames, read_extrinsic, write_extrinsic  # noqa: E402
+from .io.results import write_run  # noqa: E402
 from .pipeline import CalibrationResult, calibrate  # noqa: E402
+from .study import StudyPlan, run_study  # noqa: E402
 
-__all__ = ["CalibrationResult", "ParetocalError", "Settings", "__version__", "calibrate",
-           "load_frames", "load_settings", "read_extrinsic", "write_extrinsic"]
+__all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
+           "calibrate", "check_extrinsic", "depth_map", "load_frames", "load_settings",
+           "read_extrinsic", "run_study", "write_depth", "write_extrinsic", "write_run"]
