@@ -95,9 +95,15 @@ def _fmt_err(e: dict | None) -> str:
 
 @app.command()
 def calibrate(
-    source: Annotated[Path, typer.Argument(help="Dataset folder: KITTI raw drive or date folder, "
-                                                "KITTI object 'training', or a generic folder.")],
-    out: Annotated[Path, typer.Option("--out", help="Run directory to write.")],
+    source: Annotated[Optional[Path], typer.Argument(
+        help="Dataset folder: KITTI raw drive or date folder, KITTI object 'training', or a "
+             "generic folder (not needed with --resume).")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Run directory to write.")] = None,
+    resume: Annotated[Optional[Path], typer.Option(
+        help="Continue the interrupted run in this run directory (same data, start and "
+             "settings; the result equals an uninterrupted run).")] = None,
+    checkpoint_every: Annotated[int, typer.Option(
+        "--checkpoint-every", help="Save the search state every N generations (0: never).")] = 5,
     init: Annotated[Optional[Path], typer.Option(help="Initial extrinsic (YAML/JSON with "
                                                       "T_cam_lidar); default: the dataset's.")] = None,
     frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
@@ -133,10 +139,14 @@ def calibrate(
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
     from .io import load_frames, read_extrinsic
-    from .io.results import write_run
-    from .pipeline import calibrate as run_calibration
 
     _setup_logging(verbose, quiet)
+    if resume is not None:
+        return _resume(resume, verbose, quiet, checkpoint_every)
+    if source is None or out is None:
+        raise SettingsError("calibrate needs SOURCE and --out (or --resume RUN_DIR)")
+    if checkpoint_every < 0:
+        raise SettingsError("--checkpoint-every must be 0 or more")
     settings = load_settings(config)
     if budget_ms is not None and rule is None:
         rule = Rule.budget
@@ -156,16 +166,84 @@ def calibrate(
     settings.validate()
     T_init = read_extrinsic(init) if init is not None else None
     loaded = load_frames(source, settings.frames, settings.camera)
+    _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every)
+
+
+RUN_ARGS = "run_args.json"       # what --resume needs to rebuild the run
+CHECKPOINT = "checkpoint.pkl"
+
+
+def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,
+                     checkpoint_every: int) -> None:
+    """Calibrate with checkpoints in ``out``; on an interrupt write the partial front."""
+    import json
+
+    from .io.atomic import atomic_write_text
+    from .io.results import write_run
+    from .pipeline import calibrate as run_calibration
+    from .search.checkpoint import Checkpoint, SearchInterrupted
+
+    ckpt = None
+    if checkpoint_every > 0:
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / RUN_ARGS, json.dumps({
+            "source": str(Path(source).resolve()),
+            "T_init": None if T_init is None else np.asarray(T_init).tolist(),
+            "settings": settings.to_dict(), "figures": figures}, indent=1) + "\n")
+        ckpt = Checkpoint(out / CHECKPOINT, every=checkpoint_every)
     interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
-        result = run_calibration(loaded, T_init, settings, progress=progress)
-        write_run(result, out, loaded, figures=figures)
+    try:
+        with _Progress(interactive) as progress:
+            result = run_calibration(loaded, T_init, settings, progress=progress,
+                                     checkpoint=ckpt)
+            write_run(result, out, loaded, figures=figures)
+    except SearchInterrupted as exc:
+        from .io.results import partial_front_csv
+
+        atomic_write_text(out / "partial_front.csv", partial_front_csv(exc.X, exc.F))
+        where = (f"checkpoint kept in {exc.checkpoint}; continue with: paretocal calibrate "
+                 f"--resume {out}" if exc.checkpoint else "no checkpoint (--checkpoint-every 0)")
+        print(f"paretocal: interrupted after generation {exc.generation}; wrote "
+              f"{out / 'partial_front.csv'}; {where}", file=sys.stderr)
+        raise typer.Exit(130) from None
+    if ckpt is not None:
+        # A finished run needs no checkpoint; its arguments stay as a record.
+        Path(ckpt.path).unlink(missing_ok=True)
     ref = result.reference_error
     typer.echo(f"paretocal: {len(loaded)} frames, {result.evaluations} evaluations in "
                f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision['rule']}), "
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval; error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
+
+
+def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int) -> None:
+    """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
+    import json
+    import tempfile
+
+    from .config import load_settings
+    from .io import load_frames
+    from .io.atomic import atomic_write_text
+
+    args_path = run_dir / RUN_ARGS
+    if not args_path.is_file():
+        raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
+                             "calibrate (or it was run with --checkpoint-every 0)")
+    try:
+        args = json.loads(args_path.read_text())
+        with tempfile.TemporaryDirectory() as tmp:
+            atomic_write_text(Path(tmp) / "settings.json", json.dumps(args["settings"]))
+            settings = load_settings(Path(tmp) / "settings.json")
+        T_init = None if args["T_init"] is None else np.asarray(args["T_init"], dtype=float)
+        source, figures = Path(args["source"]), bool(args["figures"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ParetocalError(f"{args_path}: malformed ({type(exc).__name__}: {exc})") from None
+    if not (run_dir / CHECKPOINT).exists():
+        log.warning("%s: no checkpoint; the run starts over", run_dir)
+    loaded = load_frames(source, settings.frames, settings.camera)
+    _run_calibration(loaded, source, T_init, settings, run_dir, figures, quiet,
+                     max(checkpoint_every, 1))
 
 
 @app.command()
@@ -328,6 +406,15 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     verbose = "--verbose" in args or "-v" in args
     command = typer.main.get_command(app)
+    import signal
+    import threading
+
+    def _terminate(signum, frame):
+        raise KeyboardInterrupt
+
+    # SIGTERM stops a run the way Ctrl-C does: checkpoint kept, partial front written.
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
         rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
         return int(rv) if isinstance(rv, int) else 0
@@ -356,6 +443,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"paretocal: unexpected error: {type(exc).__name__}: {exc} "
               "(rerun with --verbose for the traceback)", file=sys.stderr)
         return 1
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _console() -> None:  # pragma: no cover

@@ -22,6 +22,7 @@ from .quality import quality_report
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
+from .search.checkpoint import Checkpoint, fingerprint
 
 log = logging.getLogger(__name__)
 
@@ -220,7 +221,8 @@ def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]
 
 
 def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None,
-              settings: Settings | None = None, progress=None) -> CalibrationResult:
+              settings: Settings | None = None, progress=None,
+              checkpoint: Checkpoint | None = None) -> CalibrationResult:
     """Calibrate the camera-LiDAR extrinsic of a set of frames.
 
     Parameters
@@ -233,6 +235,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     progress : callable, optional
         ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``
         (the polish reports its passes: the first, and the one after re-selecting points).
+    checkpoint : Checkpoint, optional
+        Save the search every few generations and resume from a saved state of the same run
+        (see :mod:`paretocal.search.checkpoint`); an interrupt during the search raises
+        :class:`~paretocal.search.checkpoint.SearchInterrupted`.
 
     Returns
     -------
@@ -268,7 +274,13 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         t0 = time.perf_counter()
         seeds = coarse_seeds(feats, T_init, settings, cost_model, n_max)
         timings["seed_grid"] = time.perf_counter() - t0
-    res = run_nsga2(objective, settings.search, n_min, n_max, report("search"), seeds=seeds)
+    if checkpoint is not None:
+        checkpoint.key = fingerprint(
+            settings.to_dict(), T_init, n_min, n_max,
+            [(f.name, len(f.points), list(f.image.shape)) for f in frames],
+            seeds if seeds is not None else np.zeros(0))
+    res = run_nsga2(objective, settings.search, n_min, n_max, report("search"), seeds=seeds,
+                    checkpoint=checkpoint)
     timings["search"] = res.wall_s
     timings["search_objective"] = res.objective_s
 

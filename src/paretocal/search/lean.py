@@ -13,6 +13,7 @@ exactly by pickling it.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -76,10 +77,14 @@ class LeanNSGA2:
         return LeanState(X[keep], F[keep], rank, cd, rng, 1, len(X))
 
     def step(self, s: LeanState) -> LeanState:
-        """One generation: tournament, SBX, PM, repair, evaluation, rank-and-crowding survival."""
-        rng = s.rng
+        """One generation: tournament, SBX, PM, repair, evaluation, rank-and-crowding survival.
+
+        ``s`` is left untouched (its Generator included), so an interrupt inside a step
+        leaves the last whole generation intact for a checkpoint.
+        """
+        rng = copy.deepcopy(s.rng)
         n_mat = math.ceil(self.pop_size / 2)
-        parents = self._tournament(s, n_mat * 2).reshape(n_mat, 2)
+        parents = self._tournament(s, n_mat * 2, rng).reshape(n_mat, 2)
         Xpar = np.swapaxes(s.X[parents], 0, 1)                 # (2, n_matings, n_var)
         cross = rng.random(n_mat) < self.sbx_prob
         Q = Xpar.copy()
@@ -96,15 +101,15 @@ class LeanNSGA2:
         return LeanState(X[keep], F[keep], rank, cd, rng, s.generation + 1,
                          s.evaluations + len(off))
 
-    def _tournament(self, s: LeanState, n: int) -> np.ndarray:
+    def _tournament(self, s: LeanState, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` winners of binary tournaments between random permutations of the population."""
         m = len(s.X)
-        perms = np.concatenate([s.rng.permutation(m) for _ in range(math.ceil(2 * n / m))])
+        perms = np.concatenate([rng.permutation(m) for _ in range(math.ceil(2 * n / m))])
         a, b = perms[: 2 * n].reshape(n, 2).T
         Fa, Fb = s.F[a], s.F[b]
         a_dom = np.all(Fa <= Fb, axis=1) & np.any(Fa < Fb, axis=1)
         b_dom = np.all(Fb <= Fa, axis=1) & np.any(Fb < Fa, axis=1)
-        coin = s.rng.random(n) < 0.5
+        coin = rng.random(n) < 0.5
         ca, cb = s.crowding[a], s.crowding[b]
         by_cd = np.where(ca > cb, a, np.where(cb > ca, b, np.where(coin, a, b)))
         return np.where(a_dom, a, np.where(b_dom, b, by_cd))

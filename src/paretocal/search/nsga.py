@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -14,8 +15,12 @@ from pymoo.operators.selection.tournament import TournamentSelection
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
 from ..config import SearchSettings
+from ..errors import SettingsError
+from .checkpoint import Checkpoint, SearchInterrupted
 from .lean import LeanNSGA2
 from .problem import CalibrationProblem, RoundN, SamplingWithInit, bounds, place_seeds
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -124,7 +129,8 @@ def front_of(X: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
-              progress=None, seeds: np.ndarray | None = None) -> SearchResult:
+              progress=None, seeds: np.ndarray | None = None,
+              checkpoint: Checkpoint | None = None) -> SearchResult:
     """Run NSGA-II for ``settings.gens`` generations.
 
     Parameters
@@ -138,6 +144,11 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
         Called as ``progress(generation, total, best_f1)`` after every generation.
     seeds : ndarray, shape (k, 6), optional
         Poses placed in the initial population.
+    checkpoint : Checkpoint, optional
+        Save the state every ``checkpoint.every`` generations and resume from it when it
+        exists (``engine = "lean"`` only). On KeyboardInterrupt (SIGINT, or SIGTERM turned
+        into one) the state of the last completed generation is saved and
+        :class:`SearchInterrupted` is raised with its non-dominated set.
     """
     timed = _TimedObjective(objective)
     xl, xu = bounds(settings, n_min, n_max)
@@ -150,19 +161,41 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
             progress(gen, settings.gens, best)
 
     t0 = time.perf_counter()
+    if checkpoint is not None and settings.engine != "lean":
+        raise SettingsError("checkpoints need the array engine (search.engine: lean)")
     if settings.engine == "lean":
         engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, _round_n(xl, xu),
                            settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
-        rng = np.random.default_rng(settings.seed)
-        X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
-        if settings.include_init:
-            X0 = place_seeds(X0, xl, xu, np.vstack([np.zeros((1, 6))] + (
-                [seeds] if seeds is not None and len(seeds) else [])))
-        state = engine.start(X0, settings.seed)
-        record(1, state.F)
-        while state.generation < settings.gens:
-            state = engine.step(state)
-            record(state.generation, state.F)
+        saved = checkpoint.load() if checkpoint is not None else None
+        if saved is not None:
+            state, history[:] = saved
+            timed.evaluations = state.evaluations
+            log.info("resuming the search at generation %d", state.generation)
+        else:
+            rng = np.random.default_rng(settings.seed)
+            X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
+            if settings.include_init:
+                X0 = place_seeds(X0, xl, xu, np.vstack([np.zeros((1, 6))] + (
+                    [seeds] if seeds is not None and len(seeds) else [])))
+            state = engine.start(X0, settings.seed)
+            record(1, state.F)
+        try:
+            while state.generation < settings.gens:
+                nxt = engine.step(state)
+                # The state is replaced only once a generation is complete, so an interrupt
+                # inside step() leaves the last whole generation to save.
+                state = nxt
+                record(state.generation, state.F)
+                if checkpoint is not None and state.generation % checkpoint.every == 0:
+                    checkpoint.save(state, history)
+        except KeyboardInterrupt:
+            if checkpoint is not None:
+                checkpoint.save(state, history)
+            Xf, Ff = front_of(state.X, state.F)
+            raise SearchInterrupted(Xf, Ff, state.generation,
+                                    checkpoint.path if checkpoint is not None else None) from None
+        if checkpoint is not None:
+            checkpoint.save(state, history)     # a resume after this point skips the search
         popX, popF, gen = state.X, state.F, state.generation
     else:
         problem = CalibrationProblem(timed, xl, xu)
