@@ -47,6 +47,17 @@ def front_csv(result) -> str:
     return buf.getvalue()
 
 
+def partial_front_csv(X: np.ndarray, F: np.ndarray) -> str:
+    """CSV of an interrupted search's non-dominated set: the seven variables, f1 and f2."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(list(VARIABLES) + ["chamfer", "cost"])
+    for x, f in zip(X, F):
+        w.writerow([f"{v:.6f}" for v in x[:6]] + [str(int(round(x[6]))), f"{f[0]:.6f}",
+                                                 f"{f[1]:.6f}"])
+    return buf.getvalue()
+
+
 def _json_default(o):
     if isinstance(o, np.generic):
         return o.item()
@@ -91,4 +102,6 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
                 overlay_figure(f, result.T_ref, out / "overlay_reference.png",
                                f"dataset reference extrinsic (frame {f.name})", z_min)
                 written.append(out / "overlay_reference.png")
+            from ..report.interactive import write_interactive
+            written.append(write_interactive(result, frames, out / "interactive.html", overlay_frame))
     return written

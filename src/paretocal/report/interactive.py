@@ -1,0 +1,391 @@
+"""An interactive, self-contained HTML page of a calibration run (``interactive.html``).
+
+The page needs no network access: plotly.js is embedded inline, the camera image is a base64
+JPEG and the LiDAR points a base64 float32 array. The Pareto front is a Plotly scatter; the
+projection of the first frame's points is drawn client-side on a canvas, with the extrinsic of
+the solution clicked on the front, or the initial, chosen or reference extrinsic.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..camera import project
+from ..io.atomic import atomic_write_text
+from ..io.frame import Frame
+
+#: Largest number of LiDAR points embedded in the page.
+MAX_POINTS = 20000
+#: Depth (m) at the cold end of the colour scale, as in the static overlays.
+MAX_DEPTH = 30.0
+JPEG_QUALITY = 88
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1300px;margin:1.2em auto;
+padding:0 1em;color:#222;line-height:1.4}
+h1{font-size:1.4em;margin:0.2em 0}
+.row{display:grid;grid-template-columns:minmax(0,1fr) auto;gap:1.2em;align-items:start}
+.plotbox{grid-column:1;grid-row:1;min-width:0} #run-info{grid-column:2;grid-row:1}
+table{border-collapse:collapse;font-size:0.88em}
+td,th{border:1px solid #ccc;padding:0.2em 0.55em;text-align:left} th{background:#f4f4f4;font-weight:600}
+#overlay{width:100%;max-width:100%;height:auto;border:1px solid #ddd;display:block;background:#fff}
+.views button{font:inherit;padding:0.25em 0.9em;margin-right:0.4em;border:1px solid #999;
+border-radius:4px;background:#f7f7f7;cursor:pointer} .views button.active{background:#d33;color:#fff;
+border-color:#a00} #caption{margin:0.4em 0;font-size:0.95em} .muted{color:#666;font-size:0.85em}
+"""
+
+JS = r"""
+(function () {
+  "use strict";
+  var D = JSON.parse(document.getElementById("paretocal-data").textContent);
+  var canvas = document.getElementById("overlay"), ctx = canvas.getContext("2d");
+  var caption = document.getElementById("caption"), W = D.width, H = D.height;
+  var bin = atob(D.points.b64), buf = new Uint8Array(bin.length);
+  for (var b = 0; b < bin.length; b++) buf[b] = bin.charCodeAt(b);
+  var P = new Float32Array(buf.buffer), N = D.points.count, K = D.K, gd = null;
+  var img = new Image(), pending = null, plotReady = false, imageReady = false;
+
+  function draw(T) {
+    // A = K @ T[:3]: pixel origin at the centre of the top-left pixel.
+    var A = [0, 1, 2].map(function (r) {
+      return [0, 1, 2, 3].map(function (c) {
+        return K[r][0] * T[0][c] + K[r][1] * T[1][c] + K[r][2] * T[2][c];
+      });
+    });
+    var vis = [], zs = new Float64Array(N), us = new Float64Array(N), vs = new Float64Array(N);
+    for (var i = 0; i < N; i++) {
+      var x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
+      var hz = A[2][0] * x + A[2][1] * y + A[2][2] * z + A[2][3];
+      if (!(hz > D.z_min)) continue;
+      var u = (A[0][0] * x + A[0][1] * y + A[0][2] * z + A[0][3]) / hz;
+      var v = (A[1][0] * x + A[1][1] * y + A[1][2] * z + A[1][3]) / hz;
+      if (u < 0 || u > W - 1 || v < 0 || v > H - 1) continue;
+      zs[i] = hz; us[i] = u; vs[i] = v; vis.push(i);
+    }
+    vis.sort(function (a, c) { return zs[c] - zs[a]; });   // far first, near on top
+    ctx.drawImage(img, 0, 0, W, H);
+    var im = ctx.getImageData(0, 0, W, H), px = im.data, L = D.lut, n = L.length;
+    for (var k = 0; k < vis.length; k++) {
+      var j = vis[k], q = Math.min(n - 1, Math.floor(zs[j] / D.max_depth * (n - 1)));
+      var u0 = Math.floor(us[j]), v0 = Math.floor(vs[j]);
+      for (var dv = 0; dv < 2; dv++) {
+        for (var du = 0; du < 2; du++) {
+          var uu = u0 + du, vv = v0 + dv;
+          if (uu >= W || vv >= H) continue;
+          var o = 4 * (vv * W + uu);
+          px[o] = L[q][0]; px[o + 1] = L[q][1]; px[o + 2] = L[q][2]; px[o + 3] = 255;
+        }
+      }
+    }
+    ctx.putImageData(im, 0, 0);
+    return vis.length;
+  }
+
+  function show(view) {
+    // view: a solution index, or "initial", "chosen", "reference".
+    if (!imageReady) { pending = view; return; }
+    var T, text, key, sel = null;
+    if (view === "chosen") view = D.chosen;
+    if (view === "initial") { T = D.T_init; text = D.captions.initial; key = "initial"; }
+    else if (view === "reference" && D.T_ref) { T = D.T_ref; text = D.captions.reference; key = "reference"; }
+    else {
+      var s = D.solutions[Number(view)];
+      if (!s) return;
+      T = s.T; text = s.caption; key = String(Number(view)); sel = s;
+    }
+    var count = draw(T);
+    caption.textContent = text + " \u2014 " + count + " of " + N + " embedded points in view";
+    canvas.setAttribute("data-solution", key);
+    var btns = document.querySelectorAll(".views button");
+    for (var m = 0; m < btns.length; m++) {
+      var v = btns[m].getAttribute("data-view");
+      var on = v === key || (v === "chosen" && key === String(D.chosen));
+      btns[m].className = on ? "active" : "";
+    }
+    if (gd && plotReady) {
+      Plotly.restyle(gd, {x: [sel ? [sel.f1] : []], y: [sel ? [sel.f2] : []]}, [2]);
+    }
+  }
+
+  function ready() {
+    if (plotReady && imageReady) document.body.setAttribute("data-ready", "1");
+  }
+
+  function attachPlot() {
+    if (plotReady) return;
+    gd = document.getElementById("pareto");
+    gd.on("plotly_click", function (ev) {
+      var p = ev && ev.points && ev.points[0];
+      if (p && typeof p.customdata === "number") show(p.customdata);
+    });
+    plotReady = true;
+    ready();
+  }
+
+  var btns = document.querySelectorAll(".views button");
+  for (var m = 0; m < btns.length; m++) {
+    btns[m].addEventListener("click", function (e) { show(e.currentTarget.getAttribute("data-view")); });
+  }
+  img.onload = function () {
+    imageReady = true;
+    show(pending === null ? "chosen" : pending);
+    ready();
+  };
+  img.src = D.image;
+  window.paretocal = {show: show, data: D};
+  if (window.paretocalPlotReady) attachPlot();
+  else document.addEventListener("paretocal-plot-ready", attachPlot);
+})();
+"""
+
+# Runs after Plotly.newPlot resolves (plotly's ``post_script``).
+POST_SCRIPT = ("window.paretocalPlotReady = true; "
+               "document.dispatchEvent(new Event('paretocal-plot-ready'));")
+
+
+def _json_script(obj) -> str:
+    """JSON text safe inside ``<script type="application/json">`` (no ``<``, ``>``, ``&``)."""
+    text = json.dumps(obj, separators=(",", ":"), allow_nan=False)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
+def _depth_lut(n: int = 256) -> list[list[int]]:
+    """The static overlays' depth colours (matplotlib's ``turbo_r``: near is warm) as RGB."""
+    import matplotlib
+
+    cmap = matplotlib.colormaps["turbo_r"]
+    rgb = cmap(np.linspace(0.0, 1.0, n))[:, :3]
+    return np.round(rgb * 255).astype(int).tolist()
+
+
+def _embedded_points(frame: Frame, transforms: list[np.ndarray], z_min: float,
+                     max_points: int, seed: int = 0) -> np.ndarray:
+    """The frame's LiDAR points (float32 xyz) in view for at least one of ``transforms``,
+    randomly subsampled to at most ``max_points``."""
+    xyz = np.asarray(frame.points[:, :3], dtype=np.float64)
+    keep = np.zeros(len(xyz), dtype=bool)
+    for T in transforms:
+        keep |= project(xyz, frame.camera, T, z_min)[2]
+    idx = np.flatnonzero(keep)
+    if len(idx) > max_points:
+        idx = np.sort(np.random.default_rng(seed).choice(idx, max_points, replace=False))
+    return np.ascontiguousarray(xyz[idx], dtype="<f4")
+
+
+def _fmt_err(rot, trans) -> str:
+    return f"{rot:.3f} deg, {trans:.2f} cm"
+
+
+def _solution_entries(result) -> list[dict]:
+    front, cols = result.front, result.front.columns
+    has_ref = "ref_rotation_deg" in cols
+    k = len(front.X)
+    out = []
+    for i in range(k):
+        x = front.X[i]
+        n = int(round(x[6]))
+        ms, nbytes = float(cols["ms"][i]), int(round(cols["bytes"][i]))
+        dev = float(cols["deviation_px"][i]) if "deviation_px" in cols else None
+        tag = " (chosen)" if i == result.chosen else ""
+        hover = [f"<b>solution {i}{tag}</b>",
+                 f"x, y, z = {x[0] * 100:+.2f}, {x[1] * 100:+.2f}, {x[2] * 100:+.2f} cm",
+                 f"yaw, pitch, roll = {x[3]:+.3f}, {x[4]:+.3f}, {x[5]:+.3f} deg",
+                 f"n = {n} points/frame",
+                 f"f1 = {front.F[i, 0]:.4f} px, f2 = {front.F[i, 1]:.4f}",
+                 f"cost = {ms:.4g} ms, {nbytes:,} bytes"]
+        if dev is not None:
+            hover.append(f"deviation = {dev:.3f} px")
+        cap = (f"solution {i} of {k}{tag}: n = {n} points/frame, f1 = {front.F[i, 0]:.3f} px, "
+               f"{ms:.3g} ms")
+        entry = {"T": np.asarray(front.T[i], dtype=float).tolist(), "n": n,
+                 "f1": float(front.F[i, 0]), "f2": float(front.F[i, 1]), "ms": ms,
+                 "bytes": nbytes, "deviation_px": dev}
+        if has_ref:
+            rot, tr = float(cols["ref_rotation_deg"][i]), float(cols["ref_translation_cm"][i])
+            hover.append(f"error vs reference = {_fmt_err(rot, tr)}")
+            cap += f"; error vs reference {_fmt_err(rot, tr)}"
+            entry.update(ref_rotation_deg=rot, ref_translation_cm=tr)
+        entry["hover"] = "<br>".join(hover)
+        entry["caption"] = cap
+        out.append(entry)
+    return out
+
+
+def _figure(result, solutions: list[dict]):
+    import plotly.graph_objects as go
+
+    cols, i = result.front.columns, result.chosen
+    has_ref = "ref_rotation_deg" in cols
+    marker = dict(size=9, line=dict(width=0.6, color="#333"))
+    if has_ref:
+        marker.update(color=[s["ref_rotation_deg"] for s in solutions], colorscale="Viridis",
+                      showscale=True, colorbar=dict(title=dict(text="rot. error (deg)"), len=0.8))
+    else:
+        marker.update(color="#1f77b4")
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(
+        x=[s["f1"] for s in solutions], y=[s["f2"] for s in solutions], mode="markers",
+        name="Pareto front", marker=marker, customdata=list(range(len(solutions))),
+        text=[s["hover"] for s in solutions], hovertemplate="%{text}<extra></extra>"))
+    fig.add_trace(go.Scatter(
+        x=[solutions[i]["f1"]], y=[solutions[i]["f2"]], mode="markers",
+        name=f"chosen ({result.decision.get('rule', '?')}, n = {result.n_points})",
+        marker=dict(symbol="star", size=20, color="#d62728", line=dict(width=1, color="#000")),
+        customdata=[i], text=[solutions[i]["hover"]], hovertemplate="%{text}<extra></extra>"))
+    fig.add_trace(go.Scatter(
+        x=[solutions[i]["f1"]], y=[solutions[i]["f2"]], mode="markers", name="shown below",
+        marker=dict(symbol="circle-open", size=22, color="#000", line=dict(width=2)),
+        hoverinfo="skip"))
+    fig.update_layout(
+        template="plotly_white", hovermode="closest", height=460,
+        margin=dict(l=60, r=20, t=30, b=50),
+        xaxis=dict(title=dict(text="f1: Chamfer objective (px, lower is better)")),
+        yaxis=dict(title=dict(text="f2: normalised cost (t_norm + m_norm)")),
+        legend=dict(orientation="h", yanchor="bottom", y=1.02, x=0, font=dict(size=11)))
+    return fig
+
+
+def _run_table(result, frame: Frame) -> str:
+    from .. import __version__
+
+    obj = result.objectives()
+    rows = [("frames", f"{len(result.frames)} ({html.escape(result.frames[0])}"
+                       + (f" \u2026 {html.escape(result.frames[-1])})" if len(result.frames) > 1
+                          else ")")),
+            ("overlay frame", html.escape(frame.name)),
+            ("chosen", f"solution {result.chosen} of {len(result.front.X)}, "
+                       f"rule {html.escape(str(result.decision.get('rule', '?')))}"),
+            ("chosen n", f"{result.n_points} points/frame"),
+            ("f1 / f2", f"{obj['chamfer']:.4f} px / {obj['cost']:.4f}"),
+            ("cost", f"{obj.get('ms', float('nan')):.4g} ms, {int(obj.get('bytes', 0)):,} bytes")]
+    if "deviation_px" in obj:
+        rows.append(("deviation", f"{obj['deviation_px']:.3f} px"))
+    ref, ini = result.reference_error, result.initial_error
+    if ref is not None:
+        rows.append(("error vs reference", _fmt_err(ref["rotation_deg"], ref["translation_cm"])))
+    if ini is not None:
+        rows.append(("initial error", _fmt_err(ini["rotation_deg"], ini["translation_cm"])))
+    rows += [("evaluations", f"{int(result.evaluations):,}"),
+             ("wall time", f"{float(result.wall_s):.1f} s"),
+             ("paretocal", html.escape(str(__version__)))]
+    body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
+    return f'<table id="run-table">{body}</table>'
+
+
+def write_interactive(result, frames: list[Frame], path: str | Path, frame: int = 0,
+                      max_points: int = MAX_POINTS) -> Path:
+    """Write the interactive report page of a calibration run.
+
+    The page is a single self-contained HTML file that makes no network request: plotly.js is
+    embedded inline, the camera image as a base64 JPEG and the LiDAR points as base64 float32.
+    It shows the Pareto front (hover for a solution's variables, cost, deviation and reference
+    errors; click to project with it), the projection of one frame's LiDAR points drawn on a
+    canvas by depth (near is warm) with buttons for the initial, chosen and reference
+    extrinsics, and a table of the run.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The run (its front, chosen solution, ``T_init`` and, when known, ``T_ref``).
+    frames : list of Frame
+        The run's frames; ``frames[frame]`` is the one projected.
+    path : str or Path
+        The output file (conventionally ``interactive.html`` in the run directory); written
+        atomically.
+    frame : int, optional
+        Which frame to project (clipped to the list); the first by default.
+    max_points : int, optional
+        At most this many LiDAR points are embedded: those in view for at least one of the
+        front's, the initial or the reference extrinsic, randomly subsampled (fixed seed).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If ``frames`` is empty.
+    """
+    from .figures import KITTI_CREDIT
+
+    if not frames:
+        raise ValueError("write_interactive needs at least one frame")
+    path = Path(path)
+    f = frames[min(max(frame, 0), len(frames) - 1)]
+    z_min = float(result.settings.features.z_min)
+    cam = f.camera
+    transforms = [np.asarray(T) for T in result.front.T] + [result.T_init]
+    if result.T_ref is not None:
+        transforms.append(result.T_ref)
+    pts = _embedded_points(f, transforms, z_min, max_points)
+    ok, jpeg = cv2.imencode(".jpg", f.image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
+        raise RuntimeError("could not encode the camera image as JPEG")
+    solutions = _solution_entries(result)
+    ini = result.initial_error
+    captions = {"initial": "initial extrinsic" + (
+        f": error vs reference {_fmt_err(ini['rotation_deg'], ini['translation_cm'])}"
+        if ini is not None else ""),
+        "reference": "dataset reference extrinsic"}
+    data = {
+        "frame": f.name, "width": int(cam.width), "height": int(cam.height),
+        "K": np.asarray(cam.K, dtype=float).tolist(), "z_min": z_min, "max_depth": MAX_DEPTH,
+        "image": "data:image/jpeg;base64," + base64.b64encode(jpeg.tobytes()).decode("ascii"),
+        "points": {"count": int(len(pts)), "dtype": "float32", "layout": "xyz",
+                   "b64": base64.b64encode(pts.tobytes()).decode("ascii")},
+        "chosen": int(result.chosen),
+        "T_init": np.asarray(result.T_init, dtype=float).tolist(),
+        "T_ref": None if result.T_ref is None else np.asarray(result.T_ref, dtype=float).tolist(),
+        "solutions": [{k: v for k, v in s.items() if k != "hover"} for s in solutions],
+        "captions": captions, "lut": _depth_lut(),
+    }
+    plot = _figure(result, solutions).to_html(
+        full_html=False, include_plotlyjs=True, div_id="pareto",
+        config={"displaylogo": False, "showSendToCloud": False, "responsive": True},
+        post_script=POST_SCRIPT)
+    buttons = ['<button type="button" data-view="initial" id="view-initial">initial</button>',
+               '<button type="button" data-view="chosen" id="view-chosen">chosen</button>']
+    if result.T_ref is not None:
+        buttons.append('<button type="button" data-view="reference" id="view-reference">'
+                       'reference</button>')
+    # The run table comes before the plot in the document (the grid puts it on the right), so
+    # the plot's container has its final width when plotly.js sizes the figure.
+    title = f"paretocal calibration run: {len(result.frames)} frame(s), n = {result.n_points}"
+    page = f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{html.escape(title)}</title>
+<style>{CSS}</style>
+</head>
+<body>
+<h1>{html.escape(title)}</h1>
+<p class="muted">Hover a solution of the front for its variables and cost; click it to project
+the LiDAR points of frame {html.escape(f.name)} with its extrinsic. The buttons compare the
+initial, the chosen and (when known) the dataset's reference extrinsic.</p>
+<div class="row">
+<div id="run-info">{_run_table(result, f)}</div>
+<div class="plotbox">{plot}</div>
+</div>
+<div class="views">{''.join(buttons)}</div>
+<p id="caption">loading\u2026</p>
+<canvas id="overlay" width="{int(cam.width)}" height="{int(cam.height)}" data-solution=""></canvas>
+<p class="muted">Colour = depth 0-{MAX_DEPTH:g} m (near is warm); {len(pts)} LiDAR points
+embedded (those in view for some extrinsic of the page, at most {max_points}).
+{html.escape(KITTI_CREDIT)}</p>
+<script type="application/json" id="paretocal-data">{_json_script(data)}</script>
+<script>{JS}</script>
+</body>
+</html>
+"""
+    atomic_write_text(path, page)
+    return path
