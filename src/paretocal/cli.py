@@ -401,6 +401,43 @@ def depth(
     typer.echo(f"paretocal: wrote {len(loaded)} depth maps to {out}")
 
 
+@app.command()
+def batch(
+    manifest: Annotated[Path, typer.Argument(help="YAML or CSV manifest of entries (id, source, "
+                                                  "frames, init, vehicle, camera, order).")],
+    out: Annotated[Path, typer.Option("--out", help="Batch directory (runs/<id>/, summary).")],
+    scheduler: Annotated[Optional[str], typer.Option(
+        help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786; default: a local "
+             "cluster.")] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes of the local cluster.")] = 1,
+    check: Annotated[bool, typer.Option("--check/--no-check", help="Also check each initial "
+                                                                  "extrinsic.")] = True,
+    figures: Annotated[bool, typer.Option("--figures/--no-figures", help="PNG figures per run.")] = False,
+    pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
+    gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
+    seed: Annotated[Optional[int], typer.Option(help="Random seed (default 0).")] = None,
+    config: Annotated[Optional[Path], typer.Option(help="Settings file (YAML/JSON) by section.")] = None,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+) -> None:
+    """Calibrate every entry of MANIFEST as a task on Dask; skip entries already done."""
+    from .batch import run_batch
+    from .config import load_settings
+
+    _setup_logging(verbose, quiet)
+    if workers < 1:
+        raise SettingsError("--workers must be at least 1")
+    settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
+    settings.validate()
+    interactive = sys.stderr.isatty() and not quiet
+    with _Progress(interactive) as progress:
+        r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
+                      progress=lambda d, t: progress("entries", d, t))
+    rate = f", {r['entries_per_minute']:.2f} entries/min" if r["entries_per_minute"] else ""
+    typer.echo(f"paretocal: {r['entries']} entries: {r['ok']} ok, {r['failed']} failed, "
+               f"{r['skipped']} already done{rate}; wrote {out / 'summary.csv'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status."""
     args = sys.argv[1:] if argv is None else list(argv)

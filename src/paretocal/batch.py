@@ -1,0 +1,351 @@
+"""Calibrating a fleet's logs: one task per manifest entry on a Dask cluster.
+
+A manifest lists sources (dataset folders), optional frame selections, initial extrinsics and
+vehicle ids. Each entry is an independent task: the worker reads its own frames (no large array
+crosses the network), calibrates, checks the initial extrinsic for miscalibration, writes the
+usual run directory and a small ``entry.json`` record, and returns that record. An entry whose
+record says ``ok`` is done: rerunning the batch skips it, so a killed batch resumes. A failing
+entry is recorded with its reason and does not stop the others.
+
+Manifest (YAML)::
+
+    entries:
+      - {id: car07_d0005, source: /logs/car07/2011_09_26_drive_0005_sync, frames: "0:20",
+         init: /logs/car07/nominal.yaml, vehicle: car07, order: 1}
+
+or CSV with the same columns (``id, source, frames, init, vehicle, camera, order``). Relative
+paths are relative to the manifest.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, ParetocalError
+from .io.atomic import atomic_path, atomic_write_text
+
+RECORD = "entry.json"
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
+                   "n_points", "drift_rotation_deg", "drift_translation_cm",
+                   "ref_rotation_deg", "ref_translation_cm", "chamfer", "ms_per_eval",
+                   "check_verdict", "check_score", "wall_s", "worker"] + \
+                  [f"T_{i}{j}" for i in range(3) for j in range(4)]
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One source to calibrate (paths absolute)."""
+
+    id: str
+    source: str
+    frames: str | None = None
+    init: str | None = None
+    vehicle: str | None = None
+    camera: int = 2
+    order: str | None = None
+
+
+def read_manifest(path: str | Path) -> list[Entry]:
+    """Entries of a YAML (``entries:`` list, or a bare list) or CSV manifest.
+
+    Raises :class:`InputError` naming the manifest and the entry for a missing ``id`` or
+    ``source``, a duplicate or unsafe id (it names a folder), or an unknown column.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: manifest not found")
+    if path.suffix.lower() == ".csv":
+        with open(path, newline="") as fh:
+            rows = [{k.strip(): (v.strip() if isinstance(v, str) else v) for k, v in r.items()
+                     if k is not None} for r in csv.DictReader(fh)]
+    else:
+        import yaml
+
+        try:
+            doc = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+        rows = doc.get("entries") if isinstance(doc, dict) else doc
+        if not isinstance(rows, list):
+            raise InputError(f"{path}: expected a list of entries (or a mapping with 'entries')")
+    known = set(Entry.__dataclass_fields__)
+    entries, seen = [], set()
+    for k, row in enumerate(rows):
+        where = f"{path}: entry {k + 1}"
+        if not isinstance(row, dict):
+            raise InputError(f"{where}: expected a mapping of fields")
+        row = {key: v for key, v in row.items() if v not in (None, "")}
+        unknown = sorted(set(row) - known)
+        if unknown:
+            raise InputError(f"{where}: unknown field(s) {', '.join(unknown)} "
+                             f"(known: {', '.join(sorted(known))})")
+        for key in ("id", "source"):
+            if key not in row:
+                raise InputError(f"{where}: missing '{key}'")
+        eid = str(row["id"])
+        if not _ID.match(eid):
+            raise InputError(f"{where}: id {eid!r} must be letters, digits, '_', '-' or '.'")
+        if eid in seen:
+            raise InputError(f"{where}: duplicate id {eid!r}")
+        seen.add(eid)
+        for key in ("source", "init"):
+            if key in row:
+                row[key] = str((path.parent / str(row[key])).resolve())
+        try:
+            camera = int(row.get("camera", 2))
+        except ValueError:
+            raise InputError(f"{where}: camera {row['camera']!r} is not an integer") from None
+        entries.append(Entry(id=eid, source=row["source"], camera=camera,
+                             frames=str(row["frames"]) if "frames" in row else None,
+                             init=row.get("init"),
+                             vehicle=str(row["vehicle"]) if "vehicle" in row else None,
+                             order=str(row["order"]) if "order" in row else None))
+    if not entries:
+        raise InputError(f"{path}: the manifest lists no entries")
+    return entries
+
+
+def read_record(run_dir: Path) -> dict | None:
+    """The entry's record, or None when it has none (or an unreadable one)."""
+    try:
+        return json.loads((Path(run_dir) / RECORD).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _failed(entry: Entry, reason: str, t0: float) -> dict:
+    return {**asdict(entry), "status": "failed", "reason": reason,
+            "wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()}
+
+
+def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
+              threads: int = 1, figures: bool = False) -> dict:
+    """Calibrate one entry into ``out_dir/runs/<id>``; never raises (runs on a Dask worker).
+
+    Parameters
+    ----------
+    entry : Entry
+    settings : dict
+        :meth:`Settings.to_dict` of the batch's settings.
+    out_dir : str
+    check : bool
+        Also check the initial extrinsic for miscalibration (``paretocal check``).
+    threads : int
+        Threads of the evaluation kernel in this task.
+    figures : bool
+        Write the PNG figures of each run.
+
+    Returns
+    -------
+    dict
+        The record written to ``entry.json``: the entry's fields, ``status`` ("ok" or
+        "failed"), ``reason``, the chosen ``T_cam_lidar``, ``drift_*`` (how far the
+        calibration moved the initial extrinsic), reference errors when known, the check's
+        verdict and score, ``wall_s``.
+    """
+    t0 = time.perf_counter()
+    run_dir = Path(out_dir) / "runs" / entry.id
+    try:
+        import numba
+
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+        record = _calibrate_entry(entry, settings, run_dir, check, figures)
+        record.update({"wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()})
+    except ParetocalError as exc:
+        record = _failed(entry, str(exc), t0)
+    except Exception as exc:  # noqa: BLE001 - one bad entry must not stop the batch
+        record = _failed(entry, f"unexpected {type(exc).__name__}: {exc}", t0)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(run_dir / RECORD, json.dumps(record, indent=1, default=_plain) + "\n")
+    return record
+
+
+def _plain(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)
+
+
+def _settings_from(d: dict):
+    import tempfile
+
+    from .config import load_settings
+
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "settings.json"
+        p.write_text(json.dumps(d))
+        return load_settings(p)
+
+
+def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bool,
+                     figures: bool) -> dict:
+    import dataclasses
+
+    from .check import check_extrinsic
+    from .geometry import pose_error
+    from .io import load_frames, read_extrinsic
+    from .io.results import write_run
+    from .pipeline import calibrate
+
+    settings = dataclasses.replace(_settings_from(settings_dict), camera=entry.camera,
+                                   frames=entry.frames)
+    frames = load_frames(entry.source, entry.frames, entry.camera)
+    T_init = read_extrinsic(entry.init) if entry.init else None
+    result = calibrate(frames, T_init, settings)
+    write_run(result, run_dir, frames, figures=figures)
+    drift = pose_error(result.T_cam_lidar, result.T_init)
+    ref = result.reference_error or {}
+    record = {**asdict(entry), "status": "ok", "reason": "",
+              "T_cam_lidar": result.T_cam_lidar, "n_points": result.n_points,
+              "drift_rotation_deg": float(drift["rotation_deg"]),
+              "drift_translation_cm": float(drift["translation_cm"]),
+              "ref_rotation_deg": ref.get("rotation_deg"),
+              "ref_translation_cm": ref.get("translation_cm"),
+              "chamfer": result.objectives()["chamfer"],
+              "ms_per_eval": result.objectives().get("ms")}
+    if check:
+        c = check_extrinsic(frames, result.T_init, settings)
+        record.update({"check_verdict": c["verdict"], "check_score": c["score"]})
+    return record
+
+
+def summary_rows(records: list[dict]) -> list[dict]:
+    """Flat rows (SUMMARY_COLUMNS) for the summary table, sorted by vehicle, order, id."""
+    rows = []
+    for r in records:
+        row = {k: r.get(k) for k in SUMMARY_COLUMNS if not k.startswith("T_")}
+        T = r.get("T_cam_lidar")
+        for i in range(3):
+            for j in range(4):
+                row[f"T_{i}{j}"] = None if T is None else float(T[i][j])
+        rows.append(row)
+    return sorted(rows, key=lambda r: (str(r["vehicle"] or ""), str(r["order"] or ""),
+                                       str(r["id"])))
+
+
+def write_summary(rows: list[dict], out_dir: Path) -> list[Path]:
+    """``summary.csv`` and ``summary.parquet`` (atomic); returns the paths."""
+    import io as _io
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    out_dir = Path(out_dir)
+    buf = _io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r[k]) for k in SUMMARY_COLUMNS})
+    atomic_write_text(out_dir / "summary.csv", buf.getvalue())
+    cols = {k: [r.get(k) for r in rows] for k in SUMMARY_COLUMNS}
+    for k in ("id", "vehicle", "order", "status", "reason", "source", "frames",
+              "check_verdict"):
+        cols[k] = [None if v is None else str(v) for v in cols[k]]
+    table = pa.table(cols)
+    with atomic_path(out_dir / "summary.parquet") as tmp:
+        pq.write_table(table, tmp)
+    return [out_dir / "summary.csv", out_dir / "summary.parquet"]
+
+
+def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
+              scheduler: str | None = None, workers: int | None = None, check: bool = True,
+              figures: bool = False, progress=None) -> dict:
+    """Calibrate every entry of ``manifest`` on a Dask cluster.
+
+    Parameters
+    ----------
+    manifest : path
+    out_dir : path
+    settings : Settings, optional
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``); by default a local
+        cluster of ``workers`` processes (one thread each) is started and stopped.
+    workers : int, optional
+        Local worker processes (default: 1). The kernel threads of each task are the CPU
+        count divided by the workers.
+    check, figures : bool
+        See :func:`run_entry`.
+    progress : callable, optional
+        ``progress(done, total)`` as entries finish.
+
+    Returns
+    -------
+    dict
+        ``entries``, ``skipped`` (already done), ``ran``, ``ok``, ``failed``, ``wall_s``,
+        ``entries_per_minute`` (of the entries run), ``records`` and the written ``files``.
+    """
+    from distributed import Client, LocalCluster, as_completed
+
+    from .config import Settings
+
+    t0 = time.perf_counter()
+    entries = read_manifest(manifest)
+    settings = (settings or Settings()).validate()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    done = {}
+    for e in entries:
+        rec = read_record(out / "runs" / e.id)
+        if rec is not None and rec.get("status") == "ok":
+            done[e.id] = rec
+    pending = [e for e in entries if e.id not in done]
+    records = dict(done)
+    cluster = None
+    if scheduler is None:
+        workers = max(1, int(workers or 1))
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, host="127.0.0.1")
+        client = Client(cluster)
+        threads = max(1, (os.cpu_count() or 1) // workers)
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        threads = 1
+    t_run = time.perf_counter()
+    try:
+        futures = {client.submit(run_entry, e, settings.to_dict(), str(out.resolve()), check,
+                                 threads, figures, key=f"paretocal-{e.id}-{time.time_ns()}",
+                                 pure=False): e for e in pending}
+        for k, fut in enumerate(as_completed(futures)):
+            e = futures[fut]
+            try:
+                rec = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a crashed worker fails its entry only
+                rec = _failed(e, f"worker crashed: {type(exc).__name__}: {exc}", time.perf_counter())
+                run_dir = out / "runs" / e.id
+                run_dir.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
+            records[e.id] = rec
+            if progress is not None:
+                progress(k + 1, len(pending))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    run_s = time.perf_counter() - t_run
+    ordered = [records[e.id] for e in entries]
+    rows = summary_rows(ordered)
+    files = write_summary(rows, out)
+    from .report.fleet import fleet_figure
+
+    fleet_figure(rows, out / "fleet.png")
+    files.append(out / "fleet.png")
+    ok = sum(r["status"] == "ok" for r in ordered)
+    return {"entries": len(entries), "skipped": len(done), "ran": len(pending), "ok": ok,
+            "failed": len(entries) - ok, "wall_s": time.perf_counter() - t0,
+            "run_s": run_s,
+            "entries_per_minute": 60.0 * len(pending) / run_s if pending and run_s > 0 else None,
+            "records": ordered, "files": files}
