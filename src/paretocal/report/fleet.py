@@ -28,7 +28,10 @@ def fleet_figure(rows: list[dict], path: Path) -> None:
                        edgecolor="tab:red", lw=1.5, zorder=4)
             fail = [i for i, r in enumerate(rs) if r["status"] != "ok"]
             ax.scatter(xs[fail], np.zeros(len(fail)), marker="x", s=70, color=colour, zorder=4)
+    from matplotlib.ticker import MaxNLocator
+
     for ax, label in zip(axes, ("rotation drift (deg)", "translation drift (cm)")):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("entry of the vehicle (manifest order)")
         ax.set_ylabel(f"{label}: calibrated vs initial extrinsic")
         ax.grid(alpha=0.3)
