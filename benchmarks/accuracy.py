@@ -32,7 +32,7 @@ import numpy as np
 
 from paretocal.geometry import correction_matrix, invert, pose_error
 from paretocal.io import detect_source, write_extrinsic
-from paretocal.io.readers import read_kitti_calib
+from paretocal.io.exports import kitti_velo_to_cam_text
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -44,24 +44,16 @@ def blind_copy(date: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) 
     """A KITTI raw date folder whose ``calib_velo_to_cam.txt`` holds ``T_cam_lidar``.
 
     The frames are symbolic links; ``calib_cam_to_cam.txt`` is copied. Since the tool's extrinsic
-    for camera N is ``[I | b] R_rect_00 Tr``, the file gets ``Tr = (B R_rect_00)^-1 T``.
+    for camera N is ``[I | b] R_rect_00 Tr``, the file gets ``Tr = ([I | b] R_rect_00)^-1 T``
+    (written by the same exporter as every run's ``calib_velo_to_cam.txt``).
     Returns the drive folder of the copy.
     """
     src = detect_source(date, camera)
-    c2c = read_kitti_calib(date / "calib_cam_to_cam.txt")
-    P = c2c[f"P_rect_0{camera}"].reshape(3, 4)
-    B = np.eye(4)
-    B[:3, 3] = np.linalg.solve(P[:, :3], P[:, 3])
-    R = np.eye(4)
-    R[:3, :3] = c2c["R_rect_00"].reshape(3, 3)
-    Tr = invert(B @ R) @ T_cam_lidar
     out = dst / date.name
     out.mkdir(parents=True)
     (out / "calib_cam_to_cam.txt").write_text((date / "calib_cam_to_cam.txt").read_text())
     (out / "calib_velo_to_cam.txt").write_text(
-        "calib_time: perturbed copy for a blind accuracy trial\n"
-        f"R: {' '.join(f'{v:.12e}' for v in Tr[:3, :3].ravel())}\n"
-        f"T: {' '.join(f'{v:.12e}' for v in Tr[:3, 3])}\n")
+        kitti_velo_to_cam_text(T_cam_lidar, src.frames[0].kitti_rect, "blind accuracy trial"))
     drive = out / src.root.name
     drive.symlink_to(src.root.resolve(), target_is_directory=True)
     check = detect_source(drive, camera).frames[0].T_ref
@@ -73,20 +65,15 @@ def blind_copy_object(root: Path, T_cam_lidar: np.ndarray, dst: Path, camera: in
     """A KITTI object ``training`` folder whose calib files hold ``T_cam_lidar``.
 
     Images and scans are symbolic links; each ``calib/<stem>.txt`` is rewritten with
-    ``Tr_velo_to_cam = (B R0_rect)^-1 T`` and its other lines unchanged.
+    ``Tr_velo_to_cam = ([I | b] R0_rect)^-1 T`` and its other lines unchanged.
     """
     out = dst / "training"
     (out / "calib").mkdir(parents=True)
     for d in (f"image_{camera}", "velodyne"):
         (out / d).symlink_to((root / d).resolve(), target_is_directory=True)
-    for cfile in sorted((root / "calib").glob("*.txt")):
-        c = read_kitti_calib(cfile)
-        P = c[f"P{camera}"].reshape(3, 4)
-        B = np.eye(4)
-        B[:3, 3] = np.linalg.solve(P[:, :3], P[:, 3])
-        R = np.eye(4)
-        R[:3, :3] = c["R0_rect"].reshape(3, 3)
-        Tr = invert(B @ R) @ T_cam_lidar
+    for cfile, files in zip(sorted((root / "calib").glob("*.txt")),
+                            detect_source(root, camera).frames):
+        Tr = np.linalg.inv(files.kitti_rect) @ T_cam_lidar
         lines = [f"Tr_velo_to_cam: {' '.join(f'{v:.12e}' for v in Tr[:3].ravel())}"
                  if line.startswith("Tr_velo_to_cam:") else line
                  for line in cfile.read_text().splitlines()]
