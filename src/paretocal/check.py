@@ -22,8 +22,12 @@ NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
 
 
 def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | None = None,
-                    rot_tol_deg: float = 0.5, trans_tol_cm: float = 5.0) -> dict:
+                    rot_tol_deg: float = 0.5, trans_tol_cm: float = 5.0,
+                    progress=None) -> dict:
     """Check ``T`` (4, 4) on ``frames``.
+
+    ``progress(stage, done, total)``, if given, is told of the feature extraction per frame
+    and of the three steps after it (neighbours, local optimum, quality report).
 
     Returns
     -------
@@ -37,18 +41,26 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
 
     settings = (settings or Settings()).validate()
     T = np.asarray(T, dtype=np.float64)
-    stage = _Stage(frames, T, T, settings)
+    def tick(stage, done, total):
+        if progress is not None:
+            progress(stage, done, total)
+
+    stage = _Stage(frames, T, T, settings, lambda d, t: tick("features", d, t))
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max
     frac, gain = neighbour_fraction(obj, x0, NEIGHBOUR_STEP)
+    tick("check", 1, 3)
     xo = local_optimum(obj, x0)
+    tick("check", 2, 3)
     T_opt = obj.transforms(xo[None])[0]
     move = pose_error(T_opt, T)
     moved = {"rotation_deg": float(move["rotation_deg"]),
              "translation_cm": float(move["translation_cm"]),
              "pixels": displacement_px(obj, x0, xo)}
     score = max(moved["rotation_deg"] / rot_tol_deg, moved["translation_cm"] / trans_tol_cm)
+    quality = quality_report(obj, xo)
+    tick("check", 3, 3)
     return {
         "verdict": "miscalibrated" if score > 1.0 else "calibrated",
         "score": float(score),
@@ -58,6 +70,6 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "best_neighbour_gain_px": gain,
         "neighbour_step": {"translation_cm": 5.0, "rotation_deg": 0.5},
         "T_local_optimum": T_opt.tolist(),
-        "quality": quality_report(obj, xo),
+        "quality": quality,
         "frames": [f.name for f in frames],
     }

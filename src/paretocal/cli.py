@@ -311,7 +311,8 @@ def check(
     settings = load_settings(config)
     T = read_extrinsic(extrinsic)
     loaded = load_frames(source, frames, camera)
-    r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol)
+    with _Progress(sys.stderr.isatty() and not quiet) as progress:
+        r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
     if out is not None:
         atomic_write_text(out, json.dumps(r, indent=2) + "\n")
     m = r["moved"]
