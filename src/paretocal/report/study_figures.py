@@ -276,8 +276,8 @@ def robustness(rows: list[dict], summary: dict, path: Path) -> None:
     has_ref = "rotation_deg" in rows[0]
     panels = [("f1", "f1 of the chosen solution (px)")]
     if has_ref:
-        panels += [("rotation_deg", "rotation error vs reference (deg)"),
-                   ("translation_cm", "translation error vs reference (cm)")]
+        panels += [("rotation_deg", "rotation error vs reference (deg, log)"),
+                   ("translation_cm", "translation error vs reference (cm, log)")]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.2))
     axes = np.atleast_1d(axes)
     w = np.array([r["w1"] for r in rows])
@@ -290,6 +290,8 @@ def robustness(rows: list[dict], summary: dict, path: Path) -> None:
         if summary.get("best_w1") is not None:
             ax.axvline(summary["best_w1"], color="tab:red", ls="--", lw=1,
                        label=f"best w1 = {summary['best_w1']:g}")
+        if key != "f1":
+            ax.set_yscale("log")          # failed weights are degrees off, good ones tenths
         ax.set_xlabel("w1 (depth-edge weight); w2 = 1 - w1")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
