@@ -1,0 +1,72 @@
+"""Atomic output: a reader never sees a half-written file, and a failed write keeps the old one."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from paretocal.io.atomic import atomic_path, atomic_write_text
+
+
+def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path):
+    target = tmp_path / "result.json"
+    atomic_write_text(target, "old\n")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("new but incomplete")
+            raise RuntimeError("disk full")
+    assert target.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["result.json"]
+
+
+def test_concurrent_reader_sees_only_whole_versions(tmp_path):
+    target = tmp_path / "pareto.csv"
+    versions = [f"{k}\n" * 200_000 for k in range(8)]      # 400 kB each, distinct
+    atomic_write_text(target, versions[0])
+    seen, stop = set(), threading.Event()
+
+    def reader():
+        while not stop.is_set():
+            text = target.read_text()
+            seen.add(text[:2] if text in versions else "TORN")
+
+    t = threading.Thread(target=reader)
+    t.start()
+    try:
+        for _ in range(5):
+            for v in versions:
+                atomic_write_text(target, v)
+    finally:
+        stop.set()
+        t.join()
+    assert "TORN" not in seen and len(seen) >= 2
+
+
+def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_frames):
+    import json
+
+    import numpy as np
+
+    from paretocal import Settings, calibrate
+    from paretocal.geometry import correction_matrix
+    from paretocal.io import results
+
+    T = raw_frames[0].T_ref @ correction_matrix(np.array([0.02, 0, 0, 0.5, 0, 0]))
+    r = calibrate(raw_frames[:1], T, Settings().replace(search={"pop": 12, "gens": 2},
+                                                         decision={"refine": False}))
+    out = tmp_path / "run"
+    results.write_run(r, out, raw_frames[:1], figures=False)
+    before = (out / "result.json").read_text()
+
+    def broken(*a, **k):
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr(results, "write_extrinsic", broken)
+    r.wall_s += 1.0                        # the new result.json differs from the old one
+    with pytest.raises(OSError):
+        results.write_run(r, out, raw_frames[:1], figures=False)
+    # result.json was replaced whole (new) or not at all; nothing half-written anywhere.
+    text = (out / "result.json").read_text()
+    assert text == before or json.loads(text)["wall_s"] == pytest.approx(r.wall_s, abs=1e-3)
+    assert not [p for p in out.iterdir() if ".tmp" in p.name]
