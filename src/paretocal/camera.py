@@ -59,7 +59,8 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
     A = camera.projection(T_cam_lidar)
     h = p @ A[:, :3].T + A[:, 3]
     z = h[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # Points at or near z = 0 give inf/nan (or overflow) pixels; they are never visible.
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         uv = h[:, :2] / z[:, None]
     front = z > z_min
     visible = front & in_image(uv, camera.width, camera.height)

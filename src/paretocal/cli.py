@@ -139,6 +139,7 @@ def calibrate(
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
     from .io import load_frames, read_extrinsic
+    from .io.atomic import check_output_dir
 
     _setup_logging(verbose, quiet)
     if resume is not None:
@@ -164,6 +165,7 @@ def calibrate(
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
     settings.validate()
+    check_output_dir(out)
     T_init = read_extrinsic(init) if init is not None else None
     loaded = load_frames(source, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every)

@@ -11,9 +11,13 @@ Unknown sections or keys are errors (a typo must not silently fall back to a def
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from .errors import SettingsError
 
@@ -114,9 +118,11 @@ class Settings:
             values = {k: v for k, v in values.items() if v is not None}
             if not values:
                 continue
-            current = getattr(out, name)
+            current = getattr(out, name, None)
             if dataclasses.is_dataclass(current):
                 _check_keys(type(current), values, name)
+                values = {k: _coerce(f"{name}.{k}", v, _field_types(type(current))[k])
+                          for k, v in values.items()}
                 out = dataclasses.replace(out, **{name: dataclasses.replace(current, **values)})
             else:
                 raise SettingsError(f"unknown settings section {name!r}")
@@ -138,20 +144,41 @@ class Settings:
     def validate(self) -> "Settings":
         """Raise :class:`SettingsError` naming the option when a value is out of range."""
         s, o, f, d = self.search, self.objective, self.features, self.decision
+        for section in (s, o, f, d):
+            for fl in fields(section):
+                v = getattr(section, fl.name)
+                if isinstance(v, float) and not math.isfinite(v):
+                    raise SettingsError(f"{_option(fl.name)} {v}: must be a finite number")
         if s.pop < 4:
             raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
         if s.engine not in ("lean", "pymoo"):
             raise SettingsError(f"engine {s.engine!r}: choose 'lean' or 'pymoo'")
         if s.gens < 1:
             raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
-        if not s.bound_t_m > 0 or not s.bound_r_deg > 0:
-            raise SettingsError("search bounds must be positive (bound_t_m, bound_r_deg)")
+        if s.seed < 0:
+            raise SettingsError(f"--seed {s.seed}: must be 0 or more")
+        if not s.bound_t_m > 0:
+            raise SettingsError(f"--bound-t {s.bound_t_m:g}: the translation bound must be "
+                                "positive (metres, +- around the initial extrinsic)")
+        if not s.bound_r_deg > 0:
+            raise SettingsError(f"--bound-r {s.bound_r_deg:g}: the rotation bound must be "
+                                "positive (degrees, +- around the initial extrinsic)")
         if s.bound_r_deg > 90:
-            raise SettingsError(f"bound_r_deg {s.bound_r_deg}: at most 90 degrees")
+            raise SettingsError(f"--bound-r {s.bound_r_deg:g}: at most 90 degrees")
         if s.n_min is not None and s.n_max is not None and s.n_min > s.n_max:
             raise SettingsError(f"--n-min {s.n_min} is larger than --n-max {s.n_max}")
         if s.n_min is not None and s.n_min < 1:
             raise SettingsError(f"--n-min {s.n_min}: must be at least 1")
+        if s.n_max is not None and s.n_max < 1:
+            raise SettingsError(f"--n-max {s.n_max}: must be at least 1")
+        if not 0.0 <= s.sbx_prob <= 1.0:
+            raise SettingsError(f"sbx_prob {s.sbx_prob}: must lie in [0, 1]")
+        if s.seed_grid_deg is not None and not s.seed_grid_deg > 0:
+            raise SettingsError(f"seed_grid_deg {s.seed_grid_deg}: must be positive (or null)")
+        if s.seed_grid_t_m is not None and not s.seed_grid_t_m > 0:
+            raise SettingsError(f"seed_grid_t_m {s.seed_grid_t_m}: must be positive (or null)")
+        if s.seed_points < 1 or s.seed_count < 0:
+            raise SettingsError("seed_points must be at least 1 and seed_count not negative")
         if not 0.0 <= o.w_edge <= 1.0:
             raise SettingsError(f"--w-edge {o.w_edge}: must lie in [0, 1] (w2 = 1 - w1)")
         if o.chamfer not in ("edge-dt", "paper"):
@@ -175,19 +202,91 @@ class Settings:
             raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
         if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
+        if d.refine_iters < 0:
+            raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
         if f.ring_method not in ("auto", "scan", "elevation"):
             raise SettingsError(f"ring_method {f.ring_method!r}: choose auto, scan or elevation")
-        if f.canny_low > f.canny_high:
-            raise SettingsError("canny_low must not exceed canny_high")
+        if f.edge_weight not in ("none", "sqrt_jump", "depth_balanced"):
+            raise SettingsError(f"edge_weight {f.edge_weight!r}: choose none, sqrt_jump or "
+                                "depth_balanced")
+        if f.canny_low < 0 or f.canny_low > f.canny_high:
+            raise SettingsError("canny_low must not be negative nor exceed canny_high")
+        if len(f.grid) != 2 or min(f.grid) < 1:
+            raise SettingsError(f"grid {list(f.grid)}: two whole numbers of cells, at least 1")
+        if not 0 <= f.min_range_m < f.max_range_m:
+            raise SettingsError(f"min_range_m {f.min_range_m} and max_range_m {f.max_range_m}: "
+                                "need 0 <= min_range_m < max_range_m")
+        if not f.z_min > 0:
+            raise SettingsError(f"z_min {f.z_min}: must be positive (metres in front of the camera)")
+        negative = [k for k in ("blur_sigma", "min_edge_px", "depth_jump_m", "cross_jump_m",
+                                "cross_jump_rel", "intensity_jump", "smooth_ratio",
+                                "view_margin_px") if getattr(f, k) < 0]
+        if negative:
+            raise SettingsError(f"features: {', '.join(negative)} must not be negative")
         return self
+
+
+_OPTIONS = {"pop": "--pop", "gens": "--gens", "seed": "--seed", "n_min": "--n-min",
+            "n_max": "--n-max", "bound_t_m": "--bound-t", "bound_r_deg": "--bound-r",
+            "w_edge": "--w-edge", "budget_ms": "--budget-ms",
+            "max_deviation_px": "--max-deviation", "truncation_px": "--truncation"}
+
+
+def _option(name: str) -> str:
+    """The command-line spelling of a setting when it has one, else the setting's name."""
+    return _OPTIONS.get(name, name)
 
 
 def _check_keys(cls, values: dict, section: str) -> None:
     names = {f.name for f in fields(cls)}
-    unknown = sorted(set(values) - names)
+    unknown = sorted(map(str, set(values) - names))
     if unknown:
         raise SettingsError(f"unknown setting(s) {', '.join(unknown)} in section {section!r} "
                             f"(known: {', '.join(sorted(names))})")
+
+
+def _field_types(cls) -> dict[str, str]:
+    """Each field's annotation as written (a string: the module uses postponed annotations)."""
+    return {f.name: str(f.type) for f in fields(cls)}
+
+
+def _coerce(name: str, value: Any, annotation: str) -> Any:
+    """``value`` checked against a field annotation (``int``, ``float | None``,
+    ``tuple[int, int]``, ...): ints widen to floats, whole floats narrow to ints, anything else
+    of the wrong type is a :class:`SettingsError` naming the setting."""
+    kinds = [k.strip() for k in annotation.split("|")]
+    if value is None:
+        if "None" in kinds:
+            return None
+        raise SettingsError(f"{name}: a value is required (got null)")
+    kind = kinds[0]
+    ok = False
+    number = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+    if kind == "bool":
+        ok = isinstance(value, (bool, np.bool_))
+        value = bool(value) if ok else value
+    elif kind == "int":
+        ok = number and (isinstance(value, numbers.Integral) or float(value).is_integer())
+        value = int(value) if ok else value
+    elif kind == "float":
+        ok = number
+        value = float(value) if ok else value
+    elif kind == "str":
+        ok = isinstance(value, str) or (number and isinstance(value, numbers.Integral))
+        value = str(value) if ok else value
+    elif kind.startswith("tuple["):
+        inner = [k.strip() for k in kind[len("tuple["):-1].split(",")]
+        if isinstance(value, (list, tuple)) and len(value) == len(inner):
+            return tuple(_coerce(name, v, k) for v, k in zip(value, inner))
+    else:                                   # an annotation this checker does not know
+        return value
+    if not ok:
+        words = {"bool": "true or false", "int": "a whole number", "float": "a number",
+                 "str": "a string"}
+        want = words.get(kind) or f"a list of {len(inner)} whole numbers"
+        raise SettingsError(f"{name}: expected {want}{' or null' if 'None' in kinds else ''}, "
+                            f"got {value!r}")
+    return value
 
 
 def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
@@ -199,20 +298,26 @@ def load_settings(path: str | Path | None, base: Settings | None = None) -> Sett
         return settings
     data = read_mapping(Path(path))
     top = {f.name for f in fields(Settings)}
-    unknown = sorted(set(data) - top)
+    unknown = sorted(map(str, set(data) - top))
     if unknown:
         raise SettingsError(f"{path}: unknown section(s) {', '.join(unknown)} "
                             f"(known: {', '.join(sorted(top))})")
-    sections = {k: v for k, v in data.items() if isinstance(v, dict)}
-    scalars = {k: v for k, v in data.items() if not isinstance(v, dict)}
+    types = _field_types(Settings)
+    sections, scalars = {}, {}
+    for k, v in data.items():
+        is_section = dataclasses.is_dataclass(getattr(settings, k))
+        if is_section and not isinstance(v, dict):
+            raise SettingsError(f"{path}: section {k!r} must be a mapping of settings "
+                                f"(key: value), got {v!r}")
+        if not is_section and isinstance(v, dict):
+            raise SettingsError(f"{path}: {k!r} is a single value, not a section")
+        (sections if is_section else scalars)[k] = v
     try:
         settings = settings.replace(**sections)
-        if "grid" in sections.get("features", {}):
-            settings = settings.replace(features={"grid": tuple(sections["features"]["grid"])})
+        scalars = {k: _coerce(k, v, types[k]) for k, v in scalars.items()}
         if scalars:
             settings = dataclasses.replace(settings, **scalars)
+        settings.validate()
     except SettingsError as exc:
-        raise SettingsError(f"{path}: {exc}") from None
-    except (TypeError, ValueError) as exc:
         raise SettingsError(f"{path}: {exc}") from None
     return settings

@@ -153,9 +153,12 @@ def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
     block is not a proper rotation. A 3x4 matrix gets the bottom row added.
     """
     try:
-        T = np.asarray(T, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}: {key} is not a numeric matrix ({exc})") from None
+        T = np.array(T, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as exc:
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "inhomogeneous" in text or "sequence" in text:
+            text = "rows of different lengths"
+        raise InputError(f"{name}: {key} is not a numeric matrix ({text})") from None
     if T.shape == (3, 4):
         T = np.vstack([T, [0.0, 0.0, 0.0, 1.0]])
     if T.shape != (4, 4):
@@ -165,10 +168,12 @@ def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
     if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
         raise InputError(f"{name}: the last row of {key} must be [0, 0, 0, 1]")
     R = T[:3, :3]
-    err = np.abs(R.T @ R - np.eye(3)).max()
-    if err > tol or np.linalg.det(R) < 0:
+    with np.errstate(over="ignore", invalid="ignore"):      # huge entries: err is inf, not a warning
+        err = float(np.abs(R.T @ R - np.eye(3)).max())
+        det = float(np.linalg.det(R)) if np.isfinite(err) else float("nan")
+    if not err <= tol or not det > 0:
         raise InputError(f"{name}: the rotation block of {key} is not a rotation matrix "
-                         f"(|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4f})")
+                         f"(|R^T R - I| = {err:.2g}, det = {det:.4f})")
     if not orthonormalise:
         return T
     # Re-orthonormalise so that 6-7 significant digits in a file do not accumulate.

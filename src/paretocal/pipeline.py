@@ -27,7 +27,27 @@ from .search.checkpoint import Checkpoint, fingerprint
 log = logging.getLogger(__name__)
 
 MIN_POINTS_PER_FRAME = 30
+#: A frame with fewer Canny edge pixels is blank for the objective: a real photograph has
+#: thousands (a KITTI frame about 30 000); a flat or black image gives none, or a few dozen
+#: from noise and compression, which no LiDAR edge could be aligned with.
+MIN_EDGE_PIXELS = 100
 DEFAULT_N_MIN = 20
+
+# --- reliability verdict of result.json (see reliability()) ---------------------------------
+#: Fewer frames cannot average out one scene's biases (a single wall, a single pole), and the
+#: jackknife standard errors need several frames to mean anything.
+RELIABLE_MIN_FRAMES = 3
+#: Feature points are chosen in view (plus a 60 px margin) at the initial extrinsic, so a sound
+#: solution keeps most of them in the image (0.8-0.95 on KITTI); below this share the score is
+#: mostly the out-of-view charge and says little about alignment.
+RELIABLE_MIN_IN_VIEW = 0.6
+#: A correction within this share of a search bound was stopped by the box, not by the data:
+#: the optimum may lie outside it.
+RELIABLE_BOUND_MARGIN = 0.01
+#: Jackknife (leave-one-frame-out) standard errors above these mean the frames disagree about
+#: the pose by more than a usable calibration allows (1 deg moves a point 20 m away by 35 cm).
+RELIABLE_MAX_SE_DEG = 1.0
+RELIABLE_MAX_SE_CM = 10.0
 
 
 @dataclass
@@ -74,6 +94,8 @@ class CalibrationResult:
     history: list = field(default_factory=list)
     nsga_front: tuple | None = None
     quality: dict | None = None
+    #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
+    reliability: dict | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
     #: search, for studies that evaluate more candidates; not written to result.json.
     objective: CalibrationObjective | None = None
@@ -135,6 +157,8 @@ class CalibrationResult:
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
             "quality": self.quality,
+            "reliability": self.reliability if self.reliability is not None
+            else reliability(self),
         }
 
 
@@ -168,16 +192,142 @@ def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings
     return out
 
 
-def _check_scene(feats: list[FrameFeatures]) -> None:
-    no_edges = [f.name for f in feats if len(f.image.edge_uv) == 0]
-    if no_edges:
-        raise DegenerateSceneError(f"no image edges in frame(s) {', '.join(no_edges[:5])}: the "
-                                   "images are blank or the Canny thresholds are too high")
-    few = [f"{f.name} ({len(f.xyz)})" for f in feats if len(f.xyz) < MIN_POINTS_PER_FRAME]
+def _check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
+                 T_view: np.ndarray | None = None, z_min: float = 0.1) -> None:
+    """Refuse scenes that cannot constrain the extrinsic, saying which frames and why.
+
+    Raises :class:`DegenerateSceneError` when a frame's image has no edges, or when no frame
+    has :data:`MIN_POINTS_PER_FRAME` LiDAR feature points in view at ``T_view``; the message
+    then says whether the points lie behind the camera, outside the image or are simply too
+    few, and whether the inverse or a half-turned extrinsic would see them. Frames with too
+    few points among good ones are only reported (a warning): they add little, but no harm.
+    """
+    blank = [f"{f.name} ({len(f.image.edge_uv)} px)" for f in feats
+             if len(f.image.edge_uv) < MIN_EDGE_PIXELS]
+    if blank:
+        raise DegenerateSceneError(
+            f"no image edges in frame(s) {_names(blank)} (fewer than {MIN_EDGE_PIXELS} edge "
+            "pixels): the images are blank or the Canny thresholds (canny_low, canny_high) are "
+            "too high; leave these frames out with --frames")
+    few = [k for k, f in enumerate(feats) if len(f.xyz) < MIN_POINTS_PER_FRAME]
+    if not few:
+        return
+    listed = _names([f"{feats[k].name} ({len(feats[k].xyz)})" for k in few])
+    cause = ""
+    if frames is not None and T_view is not None:
+        cause = "; " + _view_diagnosis([frames[k] for k in few], T_view, z_min)
     if len(few) == len(feats):
         raise DegenerateSceneError(
             f"too few LiDAR feature points in view at the initial extrinsic (fewer than "
-            f"{MIN_POINTS_PER_FRAME} per frame: {', '.join(few[:5])}); check --init and the camera")
+            f"{MIN_POINTS_PER_FRAME} per frame: {listed}){cause}")
+    log.warning("frame(s) %s: fewer than %d LiDAR feature points in view at the initial "
+                "extrinsic%s; they add little to the calibration", listed, MIN_POINTS_PER_FRAME,
+                cause)
+
+
+def _names(items: list[str], most: int = 5) -> str:
+    more = f" and {len(items) - most} more" if len(items) > most else ""
+    return ", ".join(items[:most]) + more
+
+
+def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float) -> str:
+    """Why few points are in view at ``T``: a short clause for an error message."""
+    from .camera import project
+    from .geometry import invert, rotation_zyx
+
+    def counts(T_try):
+        front = seen = 0
+        for f in frames:
+            _, z, visible = project(f.points, f.camera, T_try, z_min)
+            front += int((z > z_min).sum())
+            seen += int(visible.sum())
+        return front, seen
+
+    total = sum(len(f.points) for f in frames)
+    front, seen = counts(T)
+    if front < 0.01 * total:
+        why = (f"{front} of {total} LiDAR points lie in front of the camera: nearly every "
+               "point is behind it")
+    elif seen < 0.01 * total:
+        why = (f"{seen} of {total} LiDAR points project into the image ({front} are in front "
+               "of the camera): the extrinsic or the camera intrinsics (K, width, height) are "
+               "wrong")
+    else:
+        why = (f"{seen} of {total} LiDAR points project into the image but few are edges: "
+               "the sweep is too sparse there or the feature thresholds too strict")
+    # Two classic mistakes, cheap to test: the inverse transform and a half turn.
+    half = np.eye(4)
+    half[:3, :3] = rotation_zyx(0.0, 180.0, 0.0)        # 180 deg about the camera's y axis
+    hints = [("is it inverted (T_lidar_cam given for T_cam_lidar)?", invert(T)),
+             ("is it turned 180 deg about the vertical axis?", half @ T)]
+    best = max(((counts(T_try)[1], text) for text, T_try in hints), key=lambda c: c[0])
+    if best[0] > max(20 * seen, 1000):
+        why += f"; {best[0]} points would be in view with the initial extrinsic fixed: {best[1]}"
+    else:
+        why += "; check --init and the camera"
+    return why
+
+
+def reliability(result: "CalibrationResult") -> dict:
+    """A short verdict on whether to trust ``result``, from what the run already computed.
+
+    ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
+    unreliable: too few frames, few feature points in view at the chosen extrinsic, a
+    correction stopped by a search bound (or a local optimum beyond it), or frames that
+    disagree (jackknife standard errors). Thresholds: the ``RELIABLE_*`` constants.
+    """
+    from .quality import AXES
+
+    reasons = []
+    n_frames = len(result.frames)
+    if n_frames < RELIABLE_MIN_FRAMES:
+        reasons.append(f"only {n_frames} frame(s): too few to average out one scene's biases "
+                       f"(use at least {RELIABLE_MIN_FRAMES})")
+    in_view = result.objectives().get("in_view")
+    if in_view is not None and in_view < RELIABLE_MIN_IN_VIEW:
+        reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
+                       f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
+    s = result.settings.search
+    bound = np.r_[[s.bound_t_m] * 3, [s.bound_r_deg] * 3]
+    x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)
+    at_bound = [a for a, v, b in zip(AXES, x, bound)
+                if abs(v) >= (1.0 - RELIABLE_BOUND_MARGIN) * b]
+    if at_bound:
+        reasons.append(f"the correction sits at the search bound on {', '.join(at_bound)} "
+                       f"(+-{s.bound_t_m:g} m, +-{s.bound_r_deg:g} deg): the optimum may lie "
+                       "outside; widen --bound-t / --bound-r or improve --init")
+    q = result.quality or {}
+    step = q.get("step_to_local_optimum")
+    if step is not None:
+        to_si = np.r_[[0.01] * 3, [1.0] * 3]              # the report's cm -> m, deg stays
+        target = x + np.array([step[a] for a in AXES]) * to_si
+        beyond = [a for a, t, b, v in zip(AXES, target, bound, x)
+                  if abs(t) > b and a not in at_bound]
+        if beyond:
+            reasons.append(f"the objective still falls beyond the search bound on "
+                           f"{', '.join(beyond)}: the optimum lies outside the box; widen "
+                           "--bound-t / --bound-r")
+    se = q.get("jackknife_se") or {}
+    units = q.get("units") or {}
+    se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
+                 default=None)
+    se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
+                default=None)
+    loose = [f"{a} {v:.3g} {units[a]}" for a, v in se.items() if np.isfinite(v) and (
+        (units.get(a) == "deg" and v > RELIABLE_MAX_SE_DEG)
+        or (units.get(a) == "cm" and v > RELIABLE_MAX_SE_CM))]
+    if loose:
+        reasons.append(f"the frames disagree: jackknife standard error {', '.join(loose)} "
+                       f"(limits {RELIABLE_MAX_SE_DEG:g} deg, {RELIABLE_MAX_SE_CM:g} cm)")
+    return {
+        "verdict": "unreliable" if reasons else "ok",
+        "reasons": reasons,
+        "frames": n_frames,
+        "in_view": None if in_view is None else round(float(in_view), 4),
+        "at_bound": at_bound,
+        "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
+        "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
+    }
 
 
 class _Stage:
@@ -191,7 +341,7 @@ class _Stage:
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
                  settings: Settings, progress=None):
         feats_all = prepare_features(frames, T_view, settings, progress)
-        _check_scene(feats_all)
+        _check_scene(feats_all, frames, T_view, settings.features.z_min)
         o, z_min = settings.objective, settings.features.z_min
         parts = [f.split(o.holdout) for f in feats_all]
         self.feats = [p[0] for p in parts]
@@ -341,13 +491,17 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     quality = quality_report(objective, X[i])
     wall = time.perf_counter() - t_start
     timings["total"] = wall
-    return CalibrationResult(
+    result = CalibrationResult(
         T_cam_lidar=T[i], T_init=T_init, T_ref=T_ref, chosen=i,
         front=Front(X=X, F=F, T=T, columns=columns), decision=decision,
         cost_model=cost_model, settings=settings, evaluations=evaluations, wall_s=wall,
         timings=timings, frames=[f.name for f in frames],
         feature_counts=_feature_counts(feats), n_range=(n_min, n_max), history=res.history,
         nsga_front=(res.X, res.F), quality=quality, objective=objective, seed_poses=seeds)
+    result.reliability = reliability(result)
+    if result.reliability["verdict"] != "ok":
+        log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))
+    return result
 
 
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:

@@ -21,6 +21,9 @@ from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
 from .rings import recover_rings
 
 CROP_EXTRA_PX = 150.0
+#: Points projected at a time when a sweep is cropped to the view: the projection's float64
+#: temporaries (about 80 bytes a point) then stay a few tens of MB however large the sweep.
+CROP_BLOCK = 1 << 18
 
 
 @dataclass(eq=False)
@@ -102,9 +105,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     # of the sweep near the view, a quarter of the points (a wider margin than the view's, so
     # that no neighbour of a kept point is lost).
     ring = recover_rings(frame.points, features.ring_method)
-    uv, z, _ = project(frame.points, frame.camera, T_init, features.z_min)
-    near = (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
-                                           features.view_margin_px + CROP_EXTRA_PX)
+    near = _near_view(frame.points, frame.camera, T_init, features.z_min,
+                      features.view_margin_px + CROP_EXTRA_PX)
     lf: LidarFeatures = lidar_features(
         frame.points[near], ring=ring[near],
         depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
@@ -128,6 +130,18 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     order = stratified_order(group, cv * gx + cu, rng)
     return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], weight[order],
                          lf.n_rings)
+
+
+def _near_view(points: np.ndarray, camera: Camera, T: np.ndarray, z_min: float,
+               margin_px: float) -> np.ndarray:
+    """Mask of the points in front of the camera that project into the image grown by
+    ``margin_px``, computed block by block (see :data:`CROP_BLOCK`)."""
+    near = np.empty(len(points), dtype=bool)
+    for a in range(0, len(points), CROP_BLOCK):
+        uv, z, _ = project(points[a:a + CROP_BLOCK], camera, T, z_min)
+        near[a:a + CROP_BLOCK] = (z > z_min) & in_image(uv, camera.width, camera.height,
+                                                        margin_px)
+    return near
 
 
 RANGE_BINS_M = np.array([5.0, 10.0, 20.0, 40.0])

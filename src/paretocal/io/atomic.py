@@ -38,3 +38,25 @@ def atomic_write_text(path: Path, text: str) -> None:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
+
+
+def check_output_dir(path: Path, option: str = "--out") -> Path:
+    """Fail before any work when ``path`` cannot become an output folder.
+
+    Raises :class:`~paretocal.errors.SettingsError` naming ``option`` when ``path`` is a file,
+    when a file stands where one of its parent folders should be, or when the nearest existing
+    folder is not writable.
+    """
+    from ..errors import SettingsError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise SettingsError(f"{option} {path}: exists and is not a folder")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise SettingsError(f"{option} {path}: {parent} is a file, not a folder")
+            if not os.access(parent if not path.exists() else path, os.W_OK | os.X_OK):
+                raise SettingsError(f"{option} {path}: no permission to write there")
+            break
+    return path

@@ -6,6 +6,8 @@ dataset's own extrinsic; :func:`load_frames` selects and reads the frames.
 
 from __future__ import annotations
 
+import logging
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,8 +19,10 @@ from ..camera import Camera
 from ..errors import InputError, SettingsError
 from ..geometry import check_rigid
 from .frame import Frame
-from .readers import (IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, read_image,
+from .readers import (IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image, read_image,
                       read_kitti_calib, read_mapping, read_points)
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -54,15 +58,26 @@ def _pair(root: Path, image_dir: Path, points_dir: Path,
         raise InputError(f"{image_dir}: image folder not found")
     if not points_dir.is_dir():
         raise InputError(f"{points_dir}: point cloud folder not found")
-    images = {p.stem: p for p in sorted(image_dir.iterdir())
-              if p.suffix.lower() in image_suffixes}
-    points = {p.stem: p for p in sorted(points_dir.iterdir())
-              if p.suffix.lower() in point_suffixes}
+    images = {p.stem: p for p in _listdir(image_dir) if p.suffix.lower() in image_suffixes}
+    points = {p.stem: p for p in _listdir(points_dir) if p.suffix.lower() in point_suffixes}
     common = sorted(set(images) & set(points))
     if not common:
         raise InputError(f"{root}: no frame pairs: {len(images)} images in {image_dir} and "
                          f"{len(points)} point clouds in {points_dir} share no file stem")
+    for what, lone, folder in (("images", sorted(set(images) - set(points)), points_dir),
+                               ("point clouds", sorted(set(points) - set(images)), image_dir)):
+        if lone:
+            log.warning("%s: %d %s without a partner in %s, skipped (%s%s)", root, len(lone),
+                        what, folder, ", ".join(lone[:5]), ", ..." if len(lone) > 5 else "")
     return [(s, images[s], points[s]) for s in common]
+
+
+def _listdir(folder: Path) -> list[Path]:
+    """The entries of ``folder``, sorted, or an InputError naming it (e.g. no permission)."""
+    try:
+        return sorted(folder.iterdir())
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot list the folder ({exc.strerror or exc})") from None
 
 
 def _camera_from_P(P: np.ndarray, width: int, height: int) -> tuple[Camera, np.ndarray]:
@@ -86,7 +101,7 @@ def _rect4(R: np.ndarray) -> np.ndarray:
 def _kitti_raw(root: Path, camera_index: int) -> Source:
     drive = root
     if not drive.name.endswith("_sync"):
-        drives = sorted(p for p in root.iterdir() if p.is_dir() and p.name.endswith("_sync"))
+        drives = [p for p in _listdir(root) if p.is_dir() and p.name.endswith("_sync")]
         if len(drives) != 1:
             raise InputError(f"{root}: a KITTI raw date folder must hold exactly one *_sync drive "
                              f"(found {len(drives)}); pass the drive folder instead")
@@ -130,10 +145,7 @@ def _kitti_object(root: Path, camera_index: int) -> Source:
 
 
 def _image_shape(path: Path) -> tuple[int, int]:
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.size == 0:
-        raise InputError(f"{path}: cannot decode the image (corrupt or not an image)")
-    return img.shape[:2]
+    return decode_image(path).shape[:2]
 
 
 #: Distortion model names of calib.yaml (``camera.model``) and of ROS camera_info
@@ -150,19 +162,16 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D,
     Returns the pinhole camera of the undistorted images, the distortion (None when there is
     nothing to undo) and the distortion model ("pinhole" or "fisheye").
     """
-    try:
-        K = np.asarray(K, dtype=np.float64)
-        width, height = int(width), int(height)
-        D = None if D is None else np.asarray(D, dtype=np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{path}: camera values are not numbers ({exc})") from None
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
-        raise InputError(f"{path}: {where['K']} must be a finite 3x3 matrix, got shape {K.shape}")
+    K = _numbers(path, where["K"], K)
+    width, height = (_size(path, where[k], v) for k, v in (("width", width), ("height", height)))
+    D = None if D is None else _numbers(path, where["D"], D).ravel()
+    if K.shape != (3, 3):
+        raise InputError(f"{path}: {where['K']} must be a 3x3 matrix, got shape {K.shape}")
+    if not np.all(np.isfinite(K)):
+        raise InputError(f"{path}: {where['K']} contains NaN or infinite values")
     if not np.allclose(K[2], [0, 0, 1]) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"{path}: {where['K']} must have positive focal lengths and last row "
                          "[0, 0, 1]")
-    if width <= 0 or height <= 0:
-        raise InputError(f"{path}: {where['width']} and {where['height']} must be positive")
     key = str(model).strip().lower() if model is not None else "pinhole"
     if key not in _DIST_MODELS:
         raise InputError(f"{path}: {where['model']} {model!r} is not one of "
@@ -185,6 +194,31 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D,
     return Camera(K=K, width=width, height=height), D, kind
 
 
+def _numbers(path: Path, name: str, value) -> np.ndarray:
+    """``value`` as a float64 array, or an InputError naming ``name`` in ``path``."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as exc:
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "inhomogeneous" in text or "sequence" in text:
+            text = "rows of different lengths"
+        raise InputError(f"{path}: {name} is not a list of numbers ({text})") from None
+
+
+def _size(path: Path, name: str, value) -> int:
+    """An image dimension: a positive whole number of pixels."""
+    try:
+        v = float(value.strip()) if isinstance(value, str) else value
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
+              and math.isfinite(float(v)) and v == int(v) and v > 0)
+    except (ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise InputError(f"{path}: {name} must be a positive whole number of pixels, got "
+                         f"{value!r}")
+    return int(v)
+
+
 def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np.ndarray | None:
     """A ROS camera_info matrix ``{rows, cols, data}``; None when the key is absent."""
     m = info.get(key)
@@ -197,7 +231,7 @@ def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np
         data = np.asarray(m["data"], dtype=np.float64)
         rows = int(m.get("rows", shape[0] if shape else 1))
         cols = int(m.get("cols", shape[1] if shape else data.size))
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"{path}: {name} values are not numbers ({exc})") from None
     if data.ndim != 1:
         raise InputError(f"{path}: {name}.data must be a flat list of numbers")
@@ -289,7 +323,7 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
         root = root / "training"
     if (root / "velodyne").is_dir() and (root / "calib").is_dir():
         return _kitti_object(root, camera_index)
-    if root.name.endswith("_sync") or any(p.name.endswith("_sync") for p in root.iterdir()
+    if root.name.endswith("_sync") or any(p.name.endswith("_sync") for p in _listdir(root)
                                           if p.is_dir()):
         return _kitti_raw(root, camera_index)
     raise InputError(f"{root}: not a recognised layout (expected a KITTI raw drive or date folder, "

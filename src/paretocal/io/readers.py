@@ -5,10 +5,15 @@ Every failure raises :class:`~paretocal.errors.InputError` naming the file and w
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
+import os
 import re
+import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 import cv2
@@ -36,8 +41,7 @@ def read_points(path: Path) -> np.ndarray:
     counts them; a NaN or infinite intensity reads as zero.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: point cloud file not found")
+    _require_file(path, "point cloud file")
     suffix = path.suffix.lower()
     try:
         if suffix == ".bin":
@@ -48,13 +52,17 @@ def read_points(path: Path) -> np.ndarray:
                                  "KITTI .bin sweep")
             pts = np.fromfile(path, dtype=np.float32).reshape(-1, 4)
         elif suffix == ".npy":
+            with open(path, "rb") as fh:
+                if fh.read(6) != b"\x93NUMPY":
+                    raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
             arr = np.load(path, allow_pickle=False)
             if arr.ndim != 2 or arr.shape[1] not in (3, 4):
                 raise InputError(f"{path}: expected an N x 3 or N x 4 array, got shape {arr.shape}")
-            if not np.issubdtype(arr.dtype, np.number):
-                raise InputError(f"{path}: expected numbers, got dtype {arr.dtype}")
+            if arr.dtype.kind not in "iuf":
+                raise InputError(f"{path}: expected real numbers, got dtype {arr.dtype}")
             pts = np.zeros((arr.shape[0], 4), dtype=np.float32)
-            pts[:, : arr.shape[1]] = arr
+            with np.errstate(over="ignore", invalid="ignore"):   # out of float32 range -> inf
+                pts[:, : arr.shape[1]] = arr
         elif suffix == ".pcd":
             pts = _read_pcd(path, path.read_bytes())
         elif suffix == ".ply":
@@ -64,9 +72,14 @@ def read_points(path: Path) -> np.ndarray:
                              f"(supported: {', '.join(POINT_SUFFIXES)})")
     except InputError:
         raise
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: cannot read point cloud ({exc})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read point cloud ({exc.strerror or exc})") from None
+    except ValueError as exc:
+        raise InputError(f"{path}: cannot read point cloud ({_first_line(exc)})") from None
     finite = np.isfinite(pts[:, :3]).all(axis=1)
+    if len(pts) and not finite.any():
+        raise InputError(f"{path}: all {len(pts)} points have NaN or infinite coordinates "
+                         "(values beyond the float32 range count as infinite)")
     if not finite.all():
         log.warning("%s: dropped %d points with NaN or infinite coordinates",
                     path, int((~finite).sum()))
@@ -88,13 +101,25 @@ def _xyzi(path: Path, fields: dict[str, np.ndarray]) -> np.ndarray:
                          f"(fields: {', '.join(fields) or 'none'}); x, y and z are required")
     n = len(lower["x"])
     pts = np.zeros((n, 4), dtype=np.float32)
-    for j, c in enumerate("xyz"):
-        pts[:, j] = lower[c]
-    for name in INTENSITY_FIELDS:
-        if name in lower:
-            pts[:, 3] = lower[name]
-            break
+    with np.errstate(over="ignore", invalid="ignore"):   # doubles out of float32 range -> inf
+        for j, c in enumerate("xyz"):
+            pts[:, j] = lower[c]
+        for name in INTENSITY_FIELDS:
+            if name in lower:
+                pts[:, 3] = lower[name]
+                break
     return pts
+
+
+def _loadtxt(body: bytes, **kw) -> np.ndarray:
+    """Whitespace-separated numbers as a 2-D float64 table; (0, 0) for no data.
+
+    numpy warns (UserWarning) on empty input: here that is an error the caller reports by
+    comparing the table's shape with the header, so the warning is silenced.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None, **kw)
 
 
 def _first_line(exc: Exception) -> str:
@@ -201,7 +226,7 @@ def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
     if data == "ascii":
         # Whitespace-separated values, one point per line (tolerant of tabs and trailing blanks).
         try:
-            table = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None)
+            table = _loadtxt(body)
         except ValueError as exc:
             raise InputError(f"{path}: PCD ascii data cannot be parsed ({_first_line(exc)})") from None
         if table.shape != (n, len(names)):
@@ -228,6 +253,15 @@ def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
 
     if len(body) < 8:
         raise InputError(f"{path}: PCD binary_compressed data is truncated (no size words)")
+    # Check the two size words before the decoder allocates what they claim: a corrupt word
+    # must not make it reserve gigabytes. LZF expands at most about 100-fold.
+    packed, unpacked = (int(v) for v in np.frombuffer(body[:8], "<u4"))
+    need = n * sum(s * c for s, c in zip(sizes, counts))
+    if unpacked != need or packed > len(body) - 8 or unpacked > 128 * packed + 1024:
+        raise InputError(f"{path}: PCD binary_compressed data cannot be decoded (its size "
+                         f"words say {packed} bytes compressed, {unpacked} uncompressed; the "
+                         f"header needs {need} uncompressed and {len(body) - 8} bytes follow); "
+                         "the file is truncated or corrupt")
     # pypcd4 parses a fixed set of header lines: hand it a canonical header of the fields parsed
     # here (plain names, so that padding fields called "_" keep their place).
     k = len(types)
@@ -317,8 +351,7 @@ def _read_ply(path: Path, raw: bytes) -> np.ndarray:
         if n == 0:
             return np.zeros((0, 4), np.float32)
         try:
-            table = np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None,
-                               skiprows=skip, max_rows=n)
+            table = _loadtxt(body, skiprows=skip, max_rows=n)
         except ValueError as exc:
             raise InputError(f"{path}: PLY ascii vertex data cannot be parsed "
                              f"({_first_line(exc)})") from None
@@ -345,21 +378,94 @@ def _read_ply(path: Path, raw: bytes) -> np.ndarray:
     return _xyzi(path, cols)
 
 
+def _require_file(path: Path, what: str) -> None:
+    """Fail naming ``path`` when it is missing or not a regular file."""
+    if path.is_file():
+        return
+    if path.is_dir():
+        raise InputError(f"{path}: {what} expected, but this is a folder")
+    if path.exists():
+        raise InputError(f"{path}: {what} expected, but this is not a regular file")
+    raise InputError(f"{path}: {what} not found")
+
+
+@contextlib.contextmanager
+def _native_stderr(sink: list[str]):
+    """Collect what native code (libpng, libjpeg, OpenCV's log) writes to file descriptor 2.
+
+    Decoders print their complaints straight to the process's stderr, which would add stray
+    lines to the CLI's one-line error; the text is appended to ``sink`` instead, for the
+    error message. Not thread-safe (fd 2 is process-wide): used around short decoder calls.
+    """
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):
+        yield                                   # no usable fd 2: let the library print
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            sink.append(tmp.read(4096).decode("utf-8", "replace"))
+
+
+def _decoder_note(texts: list[str]) -> str:
+    """The last line a decoder printed, shortened, for an error message ('' if none)."""
+    lines = [ln.strip() for t in texts for ln in t.splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    # OpenCV's log lines: "[ WARN:0@0.01] global grfmt_png.cpp:793 readFromStreamOrBuffer ..."
+    last = re.sub(r"^\[\s*(WARN|ERROR|INFO)[^\]]*\]\s*(global\s+\S+\s+)?(\w+\s+)?", "",
+                  lines[-1])
+    last = re.sub(r"\w+\('[^']*'\):\s*", "", last).split(" OpenCV(")[0].rstrip(" :")
+    return f": {last[:160]}" if last else ""
+
+
+def decode_image(path: Path) -> np.ndarray:
+    """The image at ``path`` as OpenCV decodes it (any depth and channel count).
+
+    Raises :class:`InputError` naming the file when it is missing, unreadable, empty (0 bytes)
+    or cannot be decoded; what the decoder printed is put in the message, not on stderr.
+    """
+    path = Path(path)
+    _require_file(path, "image file")
+    try:
+        raw = np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the image ({exc.strerror or exc})") from None
+    if raw.size == 0:
+        raise InputError(f"{path}: the image file is empty (0 bytes)")
+    notes: list[str] = []
+    with _native_stderr(notes):
+        try:
+            img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
+    if img is None or img.size == 0:
+        raise InputError(f"{path}: cannot decode the image (corrupt, truncated or not an "
+                         f"image{_decoder_note(notes)})")
+    if _decoder_note(notes):
+        log.warning("%s: the image decoder reported a problem%s", path, _decoder_note(notes))
+    return img
+
+
 def read_image(path: Path) -> np.ndarray:
     """Read an image as (H, W, 3) uint8 BGR; grey images are expanded to three channels."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: image file not found")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.size == 0:
-        raise InputError(f"{path}: cannot decode the image (corrupt or not an image)")
+    img = decode_image(Path(path))
     if img.dtype != np.uint8:
-        # 16-bit images: keep the relative contrast for edge detection.
+        # 16-bit and float images: keep the relative contrast for edge detection.
         img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     elif img.shape[2] == 4:
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    elif img.shape[2] != 3:
+        raise InputError(f"{path}: image has {img.shape[2]} channels; expected 1, 3 or 4")
     return img
 
 
@@ -369,13 +475,15 @@ def read_kitti_calib(path: Path) -> dict[str, np.ndarray]:
     Lines whose values are not numbers (such as ``calib_time``) are skipped.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: calibration file not found")
+    _require_file(path, "calibration file")
     out: dict[str, np.ndarray] = {}
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read calibration file ({exc})") from None
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text file (not UTF-8); expected a KITTI calibration "
+                         "file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read calibration file ({exc.strerror or exc})") from None
     for line in text.splitlines():
         if ":" not in line:
             continue
@@ -405,14 +513,24 @@ def calib_matrix(calib: dict[str, np.ndarray], key: str, shape: tuple[int, int],
 def read_mapping(path: Path) -> dict:
     """Read a YAML or JSON file whose top level is a mapping."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: file not found")
+    _require_file(path, "file")
     try:
-        text = path.read_text()
-        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"{path}: cannot parse ({first})") from None
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text file (not UTF-8); expected YAML or JSON") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
+    try:
+        data = json.loads(text) if kind == "JSON" else yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        what = exc.problem or exc.context or "syntax error"
+        raise InputError(f"{path}: not valid YAML ({where}{what})") from None
+    except (ValueError, yaml.YAMLError, RecursionError) as exc:
+        raise InputError(f"{path}: not valid {kind} ({_first_line(exc)})") from None
     if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a mapping at the top level")
+        got = "an empty file" if data is None else f"a {type(data).__name__}"
+        raise InputError(f"{path}: expected a mapping (key: value) at the top level, got {got}")
     return data

@@ -1,0 +1,594 @@
+"""Bad input through the real command line: exit 2 and one line naming the file or option.
+
+Complements the bad-input tests of test_cli.py (TestBadInput), test_io.py and test_formats.py
+(docs/bad_input.md lists every case and its test). Also: degenerate scenes, the reliability
+verdict of result.json, and a 2-million-point cloud.
+
+Every test captures at the file-descriptor level (``capfd``), so that a line printed by native
+code (libpng, OpenCV) would count as a second line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import shutil
+import subprocess
+import sys
+import tracemalloc
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from paretocal.cli import main
+from paretocal.config import Settings
+from paretocal.geometry import correction_matrix, invert, rotation_zyx
+from paretocal.io import load_frames, write_extrinsic
+
+from .helpers import write_generic
+
+FAST = ["--pop", "16", "--gens", "3", "--no-polish", "--frames", "0:2", "--no-figures",
+        "--checkpoint-every", "0"]
+
+
+def run(capfd, *args):
+    code = main([str(a) for a in args])
+    out, err = capfd.readouterr()
+    return code, out, err
+
+
+def bad(capfd, *args, expect: str | tuple[str, ...]) -> str:
+    """Run the CLI; assert exit 2 and exactly one line on stderr holding every ``expect``."""
+    code, out, err = run(capfd, *args)
+    assert code == 2, (code, out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("paretocal: error: "), err
+    for e in (expect,) if isinstance(expect, str) else expect:
+        assert e in lines[0], lines[0]
+    assert "Traceback" not in err
+    return lines[0]
+
+
+@pytest.fixture
+def rig(tmp_path, raw_frames):
+    """A generic folder with the first three KITTI frames (calib.yaml, images/, points/)."""
+    return write_generic(tmp_path / "rig", raw_frames[:3])
+
+
+def _calib(root):
+    return yaml.safe_load((root / "calib.yaml").read_text())
+
+
+def _edit_calib(root, edit):
+    doc = _calib(root)
+    edit(doc)
+    (root / "calib.yaml").write_text(yaml.safe_dump(doc))
+
+
+def _stem(raw_frames, k=0):
+    return raw_frames[k].name
+
+
+# --- missing, unreadable and odd files --------------------------------------------------------------
+
+_PRIV_CAPS = "-dac_override,-dac_read_search"
+
+
+def _can_drop_root_bypass() -> bool:
+    """Root reads any file: running with CAP_DAC_OVERRIDE and CAP_DAC_READ_SEARCH dropped
+    (setpriv) makes file permissions apply to root too."""
+    if os.geteuid() != 0:
+        return True
+    if shutil.which("setpriv") is None:
+        return False
+    r = subprocess.run(["setpriv", f"--bounding-set={_PRIV_CAPS}", f"--inh-caps={_PRIV_CAPS}",
+                        "true"], capture_output=True)
+    return r.returncode == 0
+
+
+def run_without_root_bypass(capfd, *args):
+    """The CLI as an unprivileged user would run it: in-process when not root; as root, in a
+    subprocess without the capabilities that bypass file permissions."""
+    args = [str(a) for a in args]
+    if os.geteuid() != 0:
+        return run(capfd, *args)
+    r = subprocess.run(["setpriv", f"--bounding-set={_PRIV_CAPS}", f"--inh-caps={_PRIV_CAPS}",
+                        sys.executable, "-c",
+                        "import sys; from paretocal.cli import main; sys.exit(main(sys.argv[1:]))",
+                        *args], capture_output=True, text=True, timeout=300)
+    return r.returncode, r.stdout, r.stderr
+
+
+@pytest.mark.skipif(not _can_drop_root_bypass(),
+                    reason="running as root without setpriv: permissions do not apply")
+@pytest.mark.parametrize("target, expect", [
+    ("points/{stem}.bin", "cannot read point cloud (Permission denied)"),
+    ("images/{stem}.png", "cannot read the image (Permission denied)"),
+    ("calib.yaml", "calib.yaml: cannot read (Permission denied)"),
+    ("points", "points: cannot list the folder (Permission denied)"),
+    ("init.yaml", "Invalid value for '--init': path"),
+])
+def test_unreadable_files(capfd, tmp_path, rig, raw_frames, target, expect):
+    path = rig / target.format(stem=_stem(raw_frames))
+    extra = []
+    if target == "init.yaml":
+        write_extrinsic(path, raw_frames[0].T_ref)
+        extra = ["--init", path]
+    mode = path.stat().st_mode
+    path.chmod(0)
+    try:
+        code, _, err = run_without_root_bypass(capfd, "calibrate", rig, "--out", tmp_path / "o",
+                                               *extra, *FAST)
+    finally:
+        path.chmod(mode)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and expect in lines[0], err
+
+
+@pytest.mark.skipif(not _can_drop_root_bypass(),
+                    reason="running as root without setpriv: permissions do not apply")
+def test_unwritable_out(capfd, tmp_path, rig):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        code, _, err = run_without_root_bypass(capfd, "calibrate", rig, "--out", locked / "run",
+                                               *FAST)
+    finally:
+        locked.chmod(0o755)
+    assert code == 2 and "--out" in err and "no permission to write there" in err, err
+
+
+def test_a_folder_where_a_file_should_be(capfd, tmp_path, rig, raw_frames):
+    p = rig / "points" / f"{_stem(raw_frames)}.bin"
+    p.unlink()
+    p.mkdir()
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(p), "point cloud file expected, but this is a folder"))
+    bad(capfd, "calibrate", rig, "--init", tmp_path, "--out", tmp_path / "o", *FAST,
+        expect=(str(tmp_path), "file expected, but this is a folder"))
+
+
+def test_source_is_a_file(capfd, tmp_path, rig):
+    bad(capfd, "calibrate", rig / "calib.yaml", "--out", tmp_path / "o",
+        expect="calib.yaml: source must be a folder")
+
+
+def test_unrecognised_layouts(capfd, tmp_path, object_dir):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    bad(capfd, "calibrate", empty, "--out", tmp_path / "o",
+        expect=(str(empty), "not a recognised layout (expected a KITTI raw drive or date folder"))
+    date = tmp_path / "2011_09_26"
+    for drive in ("a_sync", "b_sync"):
+        (date / drive).mkdir(parents=True)
+    bad(capfd, "calibrate", date, "--out", tmp_path / "o",
+        expect=(str(date), "must hold exactly one *_sync drive (found 2); pass the drive folder"))
+    bad(capfd, "calibrate", object_dir, "--camera", "0", "--out", tmp_path / "o",
+        expect="--camera 0: the KITTI object layout has cameras 2 and 3")
+
+
+@pytest.mark.parametrize("make", ["file", "parent"])
+def test_out_is_a_file(capfd, tmp_path, rig, make):
+    f = tmp_path / "taken"
+    f.write_text("x")
+    out = f if make == "file" else f / "run"
+    bad(capfd, "calibrate", rig, "--out", out, *FAST,
+        expect=("--out", "exists and is not a folder" if make == "file" else "is a file"))
+    assert f.read_text() == "x"
+
+
+# --- point clouds -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("content, expect", [
+    (b"", "the point cloud is empty"),
+    (np.full((100, 4), np.nan, np.float32).tobytes(), "all 100 points have NaN or infinite"),
+    (np.tile(np.float32([np.inf, 1, 1, 0]), (16, 1)).tobytes(), "all 16 points have NaN or"),
+])
+def test_empty_or_all_nan_bin(capfd, tmp_path, rig, raw_frames, content, expect):
+    p = rig / "points" / f"{_stem(raw_frames)}.bin"
+    p.write_bytes(content)
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(p), expect))
+    assert "WARNING" not in line
+
+
+def test_some_nan_points_are_dropped_with_a_count(capfd, tmp_path, rig, raw_frames):
+    p = rig / "points" / f"{_stem(raw_frames)}.bin"
+    pts = np.fromfile(p, np.float32).reshape(-1, 4)
+    pts[:7, 0] = np.nan
+    pts[7:9, 2] = -np.inf
+    pts.tofile(p)
+    code, _, err = run(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST)
+    assert code == 0, err
+    assert f"{p}: dropped 9 points with NaN or infinite coordinates" in err
+
+
+@pytest.mark.parametrize("write, expect", [
+    (lambda p: p.write_bytes(b"not numpy at all"), "not a NumPy .npy file"),
+    (lambda p: np.save(p, np.zeros((5, 3), complex)), "expected real numbers, got dtype complex128"),
+    (lambda p: np.save(p, np.zeros((5, 2))), "expected an N x 3 or N x 4 array, got shape (5, 2)"),
+    (lambda p: np.save(p, np.full((5, 3), 1e300)), "all 5 points have NaN or infinite"),
+])
+def test_bad_npy(capfd, tmp_path, rig, raw_frames, write, expect):
+    (rig / "points" / f"{_stem(raw_frames)}.bin").unlink()
+    p = rig / "points" / f"{_stem(raw_frames)}.npy"
+    write(p)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(p), expect))
+
+
+# --- images -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("damage, expect", [
+    (lambda b: b"", "the image file is empty (0 bytes)"),
+    (lambda b: b[:200], "cannot decode the image (corrupt, truncated or not an image"),
+    (lambda b: b[: len(b) // 2], "cannot decode the image (corrupt, truncated or not an image"),
+    (lambda b: b"GIF89a this is no image", "cannot decode the image"),
+])
+def test_broken_png(capfd, tmp_path, rig, raw_frames, damage, expect):
+    p = rig / "images" / f"{_stem(raw_frames)}.png"
+    p.write_bytes(damage(p.read_bytes()))
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(p), expect))
+    assert "libpng error" not in line.split("(")[0]     # the decoder's words only in the reason
+
+
+def test_image_size_disagrees_with_calib_yaml(capfd, tmp_path, rig, raw_frames):
+    p = rig / "images" / f"{_stem(raw_frames, 1)}.png"
+    cv2.imwrite(str(p), np.zeros((100, 200, 3), np.uint8))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(p), "image is 200x100 but the calibration says 1242x375"))
+
+
+# --- calib.yaml ---------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("edit, expect", [
+    (lambda c: c["camera"]["K"][0].__setitem__(0, float("nan")), "camera.K contains NaN"),
+    (lambda c: c["camera"].update(K=[[1, 2], [3]]),
+     "camera.K is not a list of numbers (rows of different lengths)"),
+    (lambda c: c["camera"].update(K="abc"), "camera.K is not a list of numbers"),
+    (lambda c: c["camera"].update(K=[[700, 0, 600], [0, 700, 180], [0, 0, 2]]),
+     "camera.K must have positive focal lengths and last row [0, 0, 1]"),
+    (lambda c: c["camera"].update(width=1242.7),
+     "camera.width must be a positive whole number of pixels, got 1242.7"),
+    (lambda c: c["camera"].update(height=0), "camera.height must be a positive whole number"),
+    (lambda c: c["camera"].update(width="wide"), "camera.width must be a positive whole number"),
+    (lambda c: c["camera"].update(D=[0.1, "x"]), "camera.D is not a list of numbers"),
+    (lambda c: c["camera"].update(D=[0.1, 0.2, 0.3]), "camera.D must hold 4, 5, 8, 12 or 14"),
+    (lambda c: c["T_cam_lidar"][0].__setitem__(3, float("nan")),
+     "T_cam_lidar contains NaN or infinite values"),
+    (lambda c: c.update(T_cam_lidar=np.eye(3).tolist()),
+     "T_cam_lidar must be 4x4 (or 3x4), got shape (3, 3)"),
+    (lambda c: c.update(camera="pinhole"), "missing 'camera' section"),
+])
+def test_malformed_calib_yaml(capfd, tmp_path, rig, edit, expect):
+    _edit_calib(rig, edit)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(rig / "calib.yaml"), expect))
+
+
+@pytest.mark.parametrize("text, expect", [
+    ("camera: [unclosed\n  K: {", "not valid YAML (line 2, column 4: expected ',' or ']'"),
+    ("- 1\n- 2\n", "expected a mapping (key: value) at the top level, got a list"),
+    ("", "expected a mapping (key: value) at the top level, got an empty file"),
+    (b"\xff\xfe\x00binary", "not a text file (not UTF-8); expected YAML or JSON"),
+])
+def test_calib_yaml_that_is_not_a_mapping(capfd, tmp_path, rig, text, expect):
+    p = rig / "calib.yaml"
+    p.write_bytes(text if isinstance(text, bytes) else text.encode())
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(p), expect))
+
+
+# --- --init -------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name, text, expect", [
+    ("reflection.yaml", "T_cam_lidar: [[1,0,0,0],[0,1,0,0],[0,0,-1,0],[0,0,0,1]]\n",
+     "is not a rotation matrix (|R^T R - I| = 0, det = -1.0000)"),
+    ("nan.yaml", "T_cam_lidar: [[.nan,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n",
+     "T_cam_lidar contains NaN or infinite values"),
+    ("shape.yaml", "T_cam_lidar: [1, 2, 3]\n", "T_cam_lidar must be 4x4 (or 3x4), got shape (3,)"),
+    ("ragged.yaml", "T_cam_lidar: [[1,0,0,0],[0,1,0],[0,0,1,0],[0,0,0,1]]\n",
+     "T_cam_lidar is not a numeric matrix (rows of different lengths)"),
+    ("text.yaml", "T_cam_lidar: hello\n", "T_cam_lidar is not a numeric matrix"),
+    ("row.yaml", "T_cam_lidar: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,1,1]]\n",
+     "the last row of T_cam_lidar must be [0, 0, 0, 1]"),
+    ("huge.yaml", "T_cam_lidar: [[1e300,0,0,0],[0,1e300,0,0],[0,0,1,0],[0,0,0,1]]\n",
+     "is not a rotation matrix"),
+    ("bad.json", "{T_cam_lidar: ", "not valid JSON (Expecting property name"),
+    ("notyaml.yaml", "T_cam_lidar: [[1, 0]\n", "not valid YAML (line 2"),
+])
+def test_bad_init(capfd, tmp_path, rig, name, text, expect):
+    p = tmp_path / name
+    p.write_text(text)
+    bad(capfd, "calibrate", rig, "--init", p, "--out", tmp_path / "o", *FAST,
+        expect=(str(p), expect))
+
+
+# --- frames -----------------------------------------------------------------------------------------
+
+def test_unpaired_files_are_named_in_a_warning(tmp_path, rig, raw_frames, caplog):
+    (rig / "points" / f"{_stem(raw_frames, 1)}.bin").unlink()
+    (rig / "points" / "extra.bin").write_bytes(b"")
+    with caplog.at_level(logging.WARNING, logger="paretocal"):
+        frames = load_frames(rig)
+    assert [f.name for f in frames] == [_stem(raw_frames, 0), _stem(raw_frames, 2)]
+    assert f"1 images without a partner in {rig / 'points'}, skipped ({_stem(raw_frames, 1)})" \
+        in caplog.text
+    assert "1 point clouds without a partner" in caplog.text and "(extra)" in caplog.text
+
+
+@pytest.mark.parametrize("spec, expect", [
+    ("5:9", "--frames 5:9: selects no frame (the source has 3)"),
+    (",", "--frames ,: selects no frame"),
+    ("0:3:0", "--frames 0:3:0: the step of '0:3:0' is zero"),
+    ("abc", "--frames abc: 'abc' is neither a frame stem nor an index"),
+])
+def test_frames_selecting_nothing(capfd, tmp_path, rig, spec, expect):
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--frames", spec, expect=expect)
+
+
+# --- options ----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("args, expect", [
+    (["--n-min", "500", "--n-max", "100"], "--n-min 500 is larger than --n-max 100"),
+    (["--bound-t", "-1"], "--bound-t -1: the translation bound must be positive"),
+    (["--bound-r", "0"], "--bound-r 0: the rotation bound must be positive"),
+    (["--bound-r", "100"], "--bound-r 100: at most 90 degrees"),
+    (["--bound-t", "inf"], "--bound-t inf: must be a finite number"),
+    (["--bound-t", "nan"], "--bound-t nan: must be a finite number"),
+    (["--n-min", "0"], "--n-min 0: must be at least 1"),
+    (["--n-max", "0"], "--n-max 0: must be at least 1"),
+    (["--pop", "2"], "--pop 2: the population needs at least 4 individuals"),
+    (["--gens", "0"], "--gens 0: needs at least 1 generation"),
+    (["--seed", "-1"], "--seed -1: must be 0 or more"),
+    (["--pop", "abc"], "Invalid value for '--pop'"),
+    (["--max-deviation", "nan"], "--max-deviation nan: must be a finite number"),
+    (["--budget-ms", "-1"], "--budget-ms must be a positive number of milliseconds"),
+    (["--camera", "9"], "--camera 9: must be 0, 1, 2 or 3"),
+])
+def test_out_of_range_options(capfd, tmp_path, rig, args, expect):
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, *args, expect=expect)
+    assert not (tmp_path / "o").exists()                # nothing written
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--n-max", "100000"], "--n-max 100000: the frames hold at most"),
+    (["--n-min", "100000"], "--n-min 100000 is larger than the largest n"),
+])
+def test_n_range_beyond_what_the_frames_hold(capfd, tmp_path, rig, args, expect):
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, *args, expect=expect)
+
+
+@pytest.mark.parametrize("text, expect", [
+    ("searc: {pop: 3}\n", "unknown section(s) searc (known: camera, decision"),
+    ("search: {pop: [1,\n", "not valid YAML (line 2, column 1"),
+    ("just a string\n", "expected a mapping (key: value) at the top level, got a str"),
+    ("search: {pop: many}\n", "search.pop: expected a whole number, got 'many'"),
+    ("search: {bound_t_m: abc}\n", "search.bound_t_m: expected a number, got 'abc'"),
+    ("search: 5\n", "section 'search' must be a mapping of settings (key: value), got 5"),
+    ("features: {grid: 5}\n", "features.grid: expected a list of 2 whole numbers, got 5"),
+    ("camera: two\n", "camera: expected a whole number, got 'two'"),
+    ("frames: [1, 2]\n", "frames: expected a string or null, got [1, 2]"),
+    ("features: {blur_sigma: -3}\n", "features: blur_sigma must not be negative"),
+    ("search: {seed: -1}\n", "--seed -1: must be 0 or more"),
+    ("decision: {refine: maybe}\n", "decision.refine: expected true or false, got 'maybe'"),
+    ("1: 2\n", "unknown section(s) 1"),
+])
+def test_bad_config_file(capfd, tmp_path, rig, text, expect):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text(text)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--config", cfg, *FAST,
+        expect=(str(cfg), expect))
+
+
+def test_config_that_is_an_image(capfd, tmp_path, rig, raw_frames):
+    cfg = rig / "images" / f"{_stem(raw_frames)}.png"
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--config", cfg, *FAST,
+        expect=(str(cfg), "not a text file (not UTF-8); expected YAML or JSON"))
+
+
+def test_missing_config_file(capfd, tmp_path, rig):
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--config", tmp_path / "no.yaml",
+        *FAST, expect=f"{tmp_path / 'no.yaml'}: file not found")
+
+
+# --- KITTI calibration files ---------------------------------------------------------------------
+
+def _kitti_copy(raw_date, dst, c2c=None, v2c=None):
+    dst.mkdir(parents=True)
+    for name, edit in (("calib_cam_to_cam.txt", c2c), ("calib_velo_to_cam.txt", v2c)):
+        text = (raw_date / name).read_text()
+        (dst / name).write_bytes(edit(text) if edit else text.encode())
+    drive = next(p for p in raw_date.iterdir() if p.name.endswith("_sync"))
+    (dst / drive.name).symlink_to(drive.resolve(), target_is_directory=True)
+    return dst
+
+
+@pytest.mark.parametrize("c2c, v2c, expect", [
+    (lambda t: "\n".join(ln for ln in t.splitlines() if not ln.startswith("P_rect_02")).encode(),
+     None, "calib_cam_to_cam.txt: missing key 'P_rect_02'"),
+    (lambda t: t.replace("P_rect_02: ", "P_rect_02: 1 ").encode(), None,
+     "'P_rect_02' has 13 values, expected 12 (3x4)"),
+    (None, lambda t: "\n".join("T: nan 0 0" if ln.startswith("T:") else ln
+                               for ln in t.splitlines()).encode(),
+     "calib_velo_to_cam.txt: 'T' contains NaN or infinite values"),
+    (None, lambda t: b"\xff\xd8 binary", "calib_velo_to_cam.txt: not a text file (not UTF-8)"),
+])
+def test_bad_kitti_calibration(capfd, tmp_path, raw_date, c2c, v2c, expect):
+    date = _kitti_copy(raw_date, tmp_path / "2011_09_26", c2c, v2c)
+    bad(capfd, "calibrate", date, "--out", tmp_path / "o", *FAST, expect=expect)
+
+
+# --- degenerate scenes ---------------------------------------------------------------------------
+
+def test_one_blank_frame_is_named(capfd, tmp_path, rig, raw_frames):
+    cv2.imwrite(str(rig / "images" / f"{_stem(raw_frames, 1)}.png"),
+                np.full((375, 1242, 3), 128, np.uint8))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(f"no image edges in frame(s) {_stem(raw_frames, 1)} (0 px)",
+                "leave these frames out with --frames"))
+
+
+def _half_turned_init(T, path):
+    """An --init turned 180 deg about the LiDAR's vertical axis (the camera looks backwards)."""
+    D = np.eye(4)
+    D[:3, :3] = rotation_zyx(180.0, 0.0, 0.0)
+    write_extrinsic(path, T @ D)
+    return path
+
+
+def test_every_point_behind_the_camera(capfd, tmp_path, rig, raw_frames):
+    # Clouds cropped to the camera's half (as many datasets ship them): turned around, the
+    # camera sees none of their points.
+    for p in (rig / "points").iterdir():
+        pts = np.fromfile(p, np.float32).reshape(-1, 4)
+        pts[pts[:, 0] > 0].tofile(p)
+    init = _half_turned_init(raw_frames[0].T_ref, tmp_path / "init.yaml")
+    bad(capfd, "calibrate", rig, "--init", init, "--out", tmp_path / "o", *FAST,
+        expect=("too few LiDAR feature points in view at the initial extrinsic",
+                "lie in front of the camera: nearly every point is behind it",
+                "is it turned 180 deg about the vertical axis?"))
+
+
+def test_inverted_init_is_suspected(capfd, tmp_path, rig, raw_frames):
+    # Only the points ahead and to the left of the vehicle: the inverse of KITTI's extrinsic
+    # makes the camera look to the right, at none of them.
+    for p in (rig / "points").iterdir():
+        pts = np.fromfile(p, np.float32).reshape(-1, 4)
+        pts[(pts[:, 0] > 0) & (pts[:, 1] > 0)].tofile(p)
+    init = tmp_path / "inverse.yaml"
+    write_extrinsic(init, invert(raw_frames[0].T_ref))
+    line = bad(capfd, "calibrate", rig, "--init", init, "--out", tmp_path / "o", *FAST,
+               expect="too few LiDAR feature points in view at the initial extrinsic")
+    assert "is it inverted (T_lidar_cam given for T_cam_lidar)?" in line, line
+
+
+def test_sparse_frames(capfd, tmp_path, rig, raw_frames):
+    for p in (rig / "points").iterdir():
+        pts = np.fromfile(p, np.float32).reshape(-1, 4)
+        pts[::2000].tofile(p)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=("too few LiDAR feature points in view at the initial extrinsic (fewer than 30",
+                "project into the image but few are edges"))
+
+
+def test_one_sparse_frame_among_good_ones_is_a_warning(raw_frames, caplog):
+    from paretocal.pipeline import _check_scene, prepare_features
+
+    frames = [raw_frames[0], dataclasses.replace(raw_frames[1],
+                                                 points=raw_frames[1].points[::2000])]
+    T = raw_frames[0].T_ref
+    feats = prepare_features(frames, T, Settings())
+    with caplog.at_level(logging.WARNING, logger="paretocal"):
+        _check_scene(feats, frames, T)
+    assert f"frame(s) {raw_frames[1].name} (" in caplog.text
+    assert "fewer than 30 LiDAR feature points in view" in caplog.text
+
+
+# --- the reliability verdict ----------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def perturbed_init(tmp_path_factory, raw_frames):
+    """KITTI's extrinsic moved by about 2 deg and 9 cm (the correction back: see the values)."""
+    p = tmp_path_factory.mktemp("init") / "init.yaml"
+    back = np.array([0.061, 0.062, 0.003, -0.86, -1.78, -0.47])
+    write_extrinsic(p, raw_frames[0].T_ref @ invert(correction_matrix(back)))
+    return p
+
+
+@pytest.fixture(scope="module")
+def rig3(tmp_path_factory, raw_frames):
+    return write_generic(tmp_path_factory.mktemp("rig3") / "rig", raw_frames[:3])
+
+
+def test_a_normal_short_run_is_ok(tmp_path, rig3, perturbed_init):
+    out = tmp_path / "run"
+    assert main(["calibrate", str(rig3), "--init", str(perturbed_init), "--out", str(out),
+                 "--pop", "16", "--gens", "3", "--no-figures", "--checkpoint-every", "0",
+                 "--quiet"]) == 0
+    doc = json.loads((out / "result.json").read_text())
+    rel = doc["reliability"]
+    assert set(rel) >= {"verdict", "reasons", "frames", "in_view", "at_bound"}
+    assert rel["frames"] == 3 and 0 < rel["in_view"] <= 1
+    assert rel["verdict"] == "ok", rel["reasons"]
+    assert doc["reference_error"]["rotation_deg"] < 1.0      # and it is indeed close
+
+
+def test_a_correction_held_by_the_bounds_is_flagged(capfd, tmp_path, rig3, perturbed_init):
+    out = tmp_path / "run"
+    code, _, err = run(capfd, "calibrate", rig3, "--init", perturbed_init, "--out", out,
+                       "--pop", "16", "--gens", "3", "--no-figures", "--checkpoint-every", "0",
+                       "--bound-r", "0.5", "--bound-t", "0.02")
+    assert code == 0, err
+    rel = json.loads((out / "result.json").read_text())["reliability"]
+    assert rel["verdict"] == "unreliable" and rel["at_bound"], rel
+    assert any("search bound" in r for r in rel["reasons"])
+    assert "WARNING: the result may be unreliable" in err
+
+
+def _fake_result(**over):
+    """The parts of a CalibrationResult that :func:`reliability` reads."""
+    from paretocal.quality import AXES, UNITS
+
+    q = {"units": dict(zip(AXES, UNITS)), "jackknife_se": dict.fromkeys(AXES, 0.1),
+         "step_to_local_optimum": dict.fromkeys(AXES, 0.0)}
+    q.update(over.pop("quality", {}))
+    X = np.zeros((1, 7))
+    X[0, :6] = over.pop("x", np.zeros(6))
+    r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
+                        front=SimpleNamespace(X=X), quality=q,
+                        settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0}))
+    in_view = over.pop("in_view", 0.9)
+    r.objectives = lambda: {"chamfer": 1.0, "in_view": in_view}
+    return r
+
+
+@pytest.mark.parametrize("over, reason", [
+    ({}, None),
+    ({"frames": ["a", "b"]}, "only 2 frame(s)"),
+    ({"in_view": 0.3}, "only 30 % of the feature points project into the image"),
+    ({"x": [0.0, 0.0, 0.0999, 0, 0, 0]}, "sits at the search bound on z"),
+    ({"x": [0, 0, 0, -1.99, 0, 0]}, "sits at the search bound on yaw"),
+    ({"x": [0.09, 0, 0, 0, 0, 0], "quality": {"step_to_local_optimum": {
+        "x": 5.0, "y": 0, "z": 0, "yaw": 0, "pitch": 0, "roll": 0}}},
+     "the objective still falls beyond the search bound on x"),
+    ({"quality": {"jackknife_se": {"x": 12.0, "y": 1, "z": 1, "yaw": 1.5, "pitch": 0,
+                                   "roll": 0}}},
+     "the frames disagree: jackknife standard error x 12 cm, yaw 1.5 deg"),
+])
+def test_reliability_reasons(over, reason):
+    from paretocal.pipeline import reliability
+
+    rel = reliability(_fake_result(**over))
+    if reason is None:
+        assert rel["verdict"] == "ok" and rel["reasons"] == []
+    else:
+        assert rel["verdict"] == "unreliable" and len(rel["reasons"]) == 1, rel
+        assert reason in rel["reasons"][0], rel["reasons"]
+    json.dumps(rel, allow_nan=False)                     # plain JSON
+
+
+# --- a very large cloud ---------------------------------------------------------------------------
+
+def test_two_million_points_load_and_prepare(tmp_path, raw_frames):
+    """18 KITTI sweeps in one cloud (about 2 M points) load and yield features; the arrays held
+    at once stay within a loose multiple of the cloud's size (measured: about 6x)."""
+    from paretocal.pipeline import prepare_features
+
+    big = np.vstack([f.points for f in raw_frames[:18]])
+    assert len(big) > 2_000_000
+    root = write_generic(tmp_path / "big", raw_frames[:1])
+    big.tofile(root / "points" / f"{raw_frames[0].name}.bin")
+    del big
+    tracemalloc.start()
+    try:
+        (frame,) = load_frames(root)
+        feats = prepare_features([frame], frame.T_ref, Settings())
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(frame.points) > 2_000_000 and len(feats[0].xyz) > 1000
+    assert peak < 20 * frame.points.nbytes, f"peak {peak / 2**20:.0f} MB"
