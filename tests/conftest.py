@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -45,3 +46,15 @@ def object_dir(data) -> Path:
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(autouse=True)
+def _fresh_paretocal_logger():
+    """Every test starts with the library logger as importing it leaves it: the CLI's
+    ``_setup_logging`` stops propagation to the root logger, which would hide later tests'
+    records from ``caplog``."""
+    log = logging.getLogger("paretocal")
+    log.handlers[:] = []
+    log.propagate = True
+    log.setLevel(logging.NOTSET)
+    yield
