@@ -177,29 +177,19 @@ def _plain(o):
     raise TypeError(type(o).__name__)
 
 
-def _settings_from(d: dict):
-    import tempfile
-
-    from .config import load_settings
-
-    with tempfile.TemporaryDirectory() as tmp:
-        p = Path(tmp) / "settings.json"
-        p.write_text(json.dumps(d))
-        return load_settings(p)
-
-
 def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bool,
                      figures: bool) -> dict:
     import dataclasses
 
     from .check import check_extrinsic
+    from .config import settings_from_mapping
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
     from .io.results import write_run
     from .pipeline import calibrate
 
-    settings = dataclasses.replace(_settings_from(settings_dict), camera=entry.camera,
-                                   frames=entry.frames)
+    settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
+                                   camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_extrinsic(entry.init) if entry.init else None
     result = calibrate(frames, T_init, settings)

@@ -222,11 +222,9 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
     import json
-    import tempfile
 
-    from .config import load_settings
+    from .config import settings_from_mapping
     from .io import load_frames
-    from .io.atomic import atomic_write_text
 
     args_path = run_dir / RUN_ARGS
     if not args_path.is_file():
@@ -234,9 +232,7 @@ def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int) ->
                              "calibrate (or it was run with --checkpoint-every 0)")
     try:
         args = json.loads(args_path.read_text())
-        with tempfile.TemporaryDirectory() as tmp:
-            atomic_write_text(Path(tmp) / "settings.json", json.dumps(args["settings"]))
-            settings = load_settings(Path(tmp) / "settings.json")
+        settings = settings_from_mapping(args["settings"], str(args_path))
         T_init = None if args["T_init"] is None else np.asarray(args["T_init"], dtype=float)
         source, figures = Path(args["source"]), bool(args["figures"])
     except (ValueError, KeyError, TypeError) as exc:

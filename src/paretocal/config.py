@@ -293,24 +293,30 @@ def load_settings(path: str | Path | None, base: Settings | None = None) -> Sett
     """Settings from a YAML/JSON config file laid out by section, over ``base``."""
     from .io.readers import read_mapping
 
-    settings = base or Settings()
     if path is None:
-        return settings
-    data = read_mapping(Path(path))
+        return base or Settings()
+    return settings_from_mapping(read_mapping(Path(path)), str(path), base)
+
+
+def settings_from_mapping(data: dict, name: str = "settings",
+                          base: Settings | None = None) -> Settings:
+    """Settings from a mapping laid out by section (as :meth:`Settings.to_dict` writes it),
+    over ``base``; errors name ``name`` (the file it came from)."""
+    settings = base or Settings()
     top = {f.name for f in fields(Settings)}
     unknown = sorted(map(str, set(data) - top))
     if unknown:
-        raise SettingsError(f"{path}: unknown section(s) {', '.join(unknown)} "
+        raise SettingsError(f"{name}: unknown section(s) {', '.join(unknown)} "
                             f"(known: {', '.join(sorted(top))})")
     types = _field_types(Settings)
     sections, scalars = {}, {}
     for k, v in data.items():
         is_section = dataclasses.is_dataclass(getattr(settings, k))
         if is_section and not isinstance(v, dict):
-            raise SettingsError(f"{path}: section {k!r} must be a mapping of settings "
+            raise SettingsError(f"{name}: section {k!r} must be a mapping of settings "
                                 f"(key: value), got {v!r}")
         if not is_section and isinstance(v, dict):
-            raise SettingsError(f"{path}: {k!r} is a single value, not a section")
+            raise SettingsError(f"{name}: {k!r} is a single value, not a section")
         (sections if is_section else scalars)[k] = v
     try:
         settings = settings.replace(**sections)
@@ -319,5 +325,5 @@ def load_settings(path: str | Path | None, base: Settings | None = None) -> Sett
             settings = dataclasses.replace(settings, **scalars)
         settings.validate()
     except SettingsError as exc:
-        raise SettingsError(f"{path}: {exc}") from None
+        raise SettingsError(f"{name}: {exc}") from None
     return settings
