@@ -592,3 +592,13 @@ def test_two_million_points_load_and_prepare(tmp_path, raw_frames):
         tracemalloc.stop()
     assert len(frame.points) > 2_000_000 and len(feats[0].xyz) > 1000
     assert peak < 20 * frame.points.nbytes, f"peak {peak / 2**20:.0f} MB"
+
+
+@pytest.mark.parametrize("command", [["study", "--quick"], ["depth"], ["batch"]])
+def test_out_onto_a_file_is_refused_by_every_command(tmp_path, raw_date, capsys, command):
+    blocker = tmp_path / "taken"
+    blocker.write_text("a file")
+    source = str(tmp_path / "m.yaml") if command[0] == "batch" else str(raw_date)
+    code = main([command[0], source, "--out", str(blocker)] + command[1:])
+    err = capsys.readouterr().err
+    assert code == 2 and "--out" in err and "not a folder" in err and len(err.splitlines()) == 1

@@ -346,7 +346,10 @@ def study(
     from .io import load_frames, read_extrinsic
     from .study import StudyPlan, run_study
 
+    from .io.atomic import check_output_dir
+
     _setup_logging(verbose, quiet)
+    check_output_dir(out)
     plan = StudyPlan.quick() if quick else StudyPlan()
     plan = dataclasses.replace(plan, **{k: v for k, v in (("pop", pop), ("gens", gens))
                                         if v is not None})
@@ -385,9 +388,12 @@ def depth(
     from .depth import write_depth
     from .io import load_frames, read_extrinsic
 
+    from .io.atomic import check_output_dir
+
     _setup_logging(False, quiet)
     if max_depth <= 0:
         raise SettingsError("--max-depth must be positive")
+    check_output_dir(out)
     loaded = load_frames(source, frames, camera)
     T = read_extrinsic(extrinsic) if extrinsic is not None else loaded[0].T_ref
     if T is None:
@@ -423,9 +429,12 @@ def batch(
     from .batch import run_batch
     from .config import load_settings
 
+    from .io.atomic import check_output_dir
+
     _setup_logging(verbose, quiet)
     if workers < 1:
         raise SettingsError("--workers must be at least 1")
+    check_output_dir(out)
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
     interactive = sys.stderr.isatty() and not quiet
