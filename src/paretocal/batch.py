@@ -27,10 +27,10 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
 
 from .errors import InputError, ParetocalError
 from .io.atomic import atomic_path, atomic_write_text
+from .io.results import json_default
 
 RECORD = "entry.json"
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -165,16 +165,8 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
     except Exception as exc:  # noqa: BLE001 - one bad entry must not stop the batch
         record = _failed(entry, f"unexpected {type(exc).__name__}: {exc}", t0)
     run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(run_dir / RECORD, json.dumps(record, indent=1, default=_plain) + "\n")
+    atomic_write_text(run_dir / RECORD, json.dumps(record, indent=1, default=json_default) + "\n")
     return record
-
-
-def _plain(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
 
 
 def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bool,

@@ -58,7 +58,7 @@ def partial_front_csv(X: np.ndarray, F: np.ndarray) -> str:
     return buf.getvalue()
 
 
-def _json_default(o):
+def json_default(o):
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -75,7 +75,7 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
     out.mkdir(parents=True, exist_ok=True)
     written = []
     doc = result.to_dict()
-    atomic_write_text(out / "result.json", json.dumps(doc, indent=2, default=_json_default) + "\n")
+    atomic_write_text(out / "result.json", json.dumps(doc, indent=2, default=json_default) + "\n")
     written.append(out / "result.json")
     atomic_write_text(out / "pareto.csv", front_csv(result))
     written.append(out / "pareto.csv")

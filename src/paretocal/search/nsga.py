@@ -181,10 +181,9 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
             record(1, state.F)
         try:
             while state.generation < settings.gens:
-                nxt = engine.step(state)
-                # The state is replaced only once a generation is complete, so an interrupt
-                # inside step() leaves the last whole generation to save.
-                state = nxt
+                # step() leaves its argument untouched, so an interrupt inside it leaves the
+                # last whole generation in `state` to save.
+                state = engine.step(state)
                 record(state.generation, state.F)
                 if checkpoint is not None and state.generation % checkpoint.every == 0:
                     checkpoint.save(state, history)

@@ -31,9 +31,10 @@ import numpy as np
 from .. import __version__
 from ..config import Settings
 from ..errors import InputError
+from ..geometry import pose_error
 from ..io.atomic import atomic_write_text
 from ..io.layouts import load_frames
-from ..io.results import _json_default, write_run
+from ..io.results import json_default, write_run
 from ..search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends
@@ -179,8 +180,6 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     so["front_best_f1"] = float(F[:, 0].min())
     so["T"] = obj.transforms(so["x"][None])[0]
     if T_ref is not None:
-        from ..geometry import pose_error
-
         so["reference_error"] = {k: float(v) for k, v in pose_error(so["T"], T_ref).items()}
     rows = ([["de", r["generation"], r["evaluations"], r["best_f1"], r["median_f1"]]
              for r in so["de_history"]]
@@ -201,8 +200,6 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
                             if settings.decision.refine else 0)
     timings["epsilon_constraint"] = time.perf_counter() - t0
     if T_ref is not None:
-        from ..geometry import pose_error
-
         for r in ec:
             if "x" in r:
                 e = pose_error(obj.transforms(r["x"][None])[0], T_ref)
@@ -282,7 +279,7 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
         "innovization": {"findings": text, "trends": fits},
         "robustness": rsum,
     }
-    atomic_write_text(out / "study.json", json.dumps(doc, indent=1, default=_json_default) + "\n")
+    atomic_write_text(out / "study.json", json.dumps(doc, indent=1, default=json_default) + "\n")
     study_report(doc, out, out / "report.html")
     return doc
 
