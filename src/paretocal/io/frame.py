@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,22 @@ class Frame:
     kitti_rect : ndarray, shape (4, 4), or None
         KITTI sources only: ``[I | b] @ R_rect_00``, so that ``T_cam_lidar = kitti_rect @ Tr``
         with KITTI's ``Tr_velo_to_cam`` (used to export the result in KITTI's own form).
+    ring : ndarray, shape (N,), int16, or None
+        Laser (ring) index per point when the file carries one (``ring``, ``laser_id``,
+        ``channel``, ``line``), 0 .. R-1; None when it must be recovered.
+    time : ndarray, shape (N,), float64, or None
+        Per-point time in seconds on the file's own clock (``time``, ``t``, ``timestamp``,
+        ``offset_time``), None when the file has none.
+    point_fields : dict
+        Which file field gave each column: ``{"intensity": name or None, "ring": name or None,
+        "time": name or None, "layout": ...}`` (written to result.json).
+    sensor_pose : ndarray, shape (4, 4), or None
+        Pose of the LiDAR sensor in the cloud's frame (cloud <- sensor), when the points are
+        stored in another frame (a vehicle frame); None when the cloud's origin is the sensor
+        or the pose is unknown (see :mod:`paretocal.features.rings`).
+    mask : ndarray, shape (H, W), bool, or None
+        Pixels that show the scene (True); False on the ego vehicle, black borders or lens
+        areas the calibration must ignore. None: every pixel.
     """
 
     name: str
@@ -41,6 +57,11 @@ class Frame:
     image_path: Path
     points_path: Path
     kitti_rect: np.ndarray | None = None
+    ring: np.ndarray | None = None
+    time: np.ndarray | None = None
+    point_fields: dict = field(default_factory=dict)
+    sensor_pose: np.ndarray | None = None
+    mask: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
