@@ -14,8 +14,9 @@ from .helpers import box_scene
 class TestRings:
     def test_kitti_sample_has_64_rings(self, raw_frames):
         for f in raw_frames:
-            ring = recover_rings(f.points)
-            assert ring.max() + 1 == 64
+            r = recover_rings(f.points)
+            assert r.method == "scan" and r.n_rings == 64 and r.purity > 0.99
+            ring = r.ring
             # Each ring is one laser: its median elevation differs from its neighbours'.
             el = elevation_deg(f.points)
             med = np.array([np.median(el[ring == k]) for k in range(64)])
@@ -48,10 +49,10 @@ class TestRings:
         assert all(len(v) == 1 for v in mapping.values())
         assert len({int(v[0]) for v in mapping.values()}) == 32
 
-    def test_shuffled_cloud_falls_back_to_elevation(self, raw_frames, rng):
+    def test_shuffled_cloud_falls_back_to_the_line_model(self, raw_frames, rng):
         pts = raw_frames[0].points[rng.permutation(len(raw_frames[0].points))]
-        ring = recover_rings(pts)
-        assert ring.max() + 1 <= 64
+        r = recover_rings(pts)
+        assert r.method == "lines" and r.n_rings == 64 and r.purity > 0.99
 
 
 class TestLidarEdges:

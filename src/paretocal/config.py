@@ -33,16 +33,16 @@ class FeatureSettings:
     depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
     cross_ring: bool = True          #: also detect edges against the rings above and below
     cross_jump_m: float = 0.3        #: across rings: jump > max(cross_jump_m, cross_jump_rel * r)
-    cross_jump_rel: float = 0.25
+    cross_jump_rel: float | None = None  #: None: from the ring spacing (features.lidar)
     ground_tol_m: float | None = None  #: ignore cross-ring pairs with both returns on the ground
     along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
     cross_fraction: float = 0.25     #: the same across rings (see README, Method)
     edge_support: bool = False       #: keep depth edges only where the near side is a surface
-    intensity_jump: float = 0.3      #: reflectance jump for an intensity edge
+    intensity_jump: float = 0.5      #: intensity jump for an intensity edge (x the 99th pct)
     min_range_m: float = 1.5
     max_range_m: float = 70.0
     smooth_ratio: float = 1.0        #: smooth points kept per depth edge (for the contrast term)
-    ring_method: str = "auto"        #: "auto", "scan" or "elevation"
+    ring_method: str = "auto"        #: "auto", "field", "scan", "lines" or "elevation"
     view_margin_px: float = 60.0     #: keep feature points projecting this far outside the image
     z_min: float = 0.1               #: minimum depth (m) of a projectable point
     reselect: bool = True            #: after the search, choose the points in view again
@@ -204,8 +204,9 @@ class Settings:
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
         if d.refine_iters < 0:
             raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
-        if f.ring_method not in ("auto", "scan", "elevation"):
-            raise SettingsError(f"ring_method {f.ring_method!r}: choose auto, scan or elevation")
+        if f.ring_method not in ("auto", "field", "scan", "lines", "elevation"):
+            raise SettingsError(f"ring_method {f.ring_method!r}: choose auto, field, scan, lines "
+                                "or elevation")
         if f.edge_weight not in ("none", "sqrt_jump", "depth_balanced"):
             raise SettingsError(f"edge_weight {f.edge_weight!r}: choose none, sqrt_jump or "
                                 "depth_balanced")
@@ -220,7 +221,7 @@ class Settings:
             raise SettingsError(f"z_min {f.z_min}: must be positive (metres in front of the camera)")
         negative = [k for k in ("blur_sigma", "min_edge_px", "depth_jump_m", "cross_jump_m",
                                 "cross_jump_rel", "intensity_jump", "smooth_ratio",
-                                "view_margin_px") if getattr(f, k) < 0]
+                                "view_margin_px") if (getattr(f, k) or 0) < 0]
         if negative:
             raise SettingsError(f"features: {', '.join(negative)} must not be negative")
         return self

@@ -14,7 +14,8 @@ from .config import Settings
 from .decide import decide, reprojection_deviation
 from .errors import DegenerateSceneError, InputError, SettingsError
 from .features.lidar import GROUP_NAMES
-from .features.prepare import FrameFeatures, prepare_frame
+from .features.prepare import FrameFeatures, frame_rings, prepare_frame
+from .features.rings import MIN_PURITY, Rings
 from .geometry import pose_error
 from .io.frame import Frame
 from .io.layouts import load_frames
@@ -180,15 +181,45 @@ def resolve_init(frames: list[Frame], T_init: np.ndarray | None) -> tuple[np.nda
 
 
 def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings,
-                     progress=None) -> list[FrameFeatures]:
-    """Features of every frame, each with its own seeded stream (independent of frame count)."""
+                     progress=None, rings: list[Rings] | None = None) -> list[FrameFeatures]:
+    """Features of every frame, each with its own seeded stream (independent of frame count).
+
+    ``rings`` (from :func:`sweep_rings`) saves recovering each sweep's rings again.
+    """
     seq = np.random.SeedSequence(settings.search.seed)
     out = []
     for k, (frame, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
         out.append(prepare_frame(frame, T_init, settings.features, settings.objective,
-                                 np.random.default_rng(child)))
+                                 np.random.default_rng(child),
+                                 rings=None if rings is None else rings[k]))
         if progress is not None:
             progress(k + 1, len(frames))
+    return out
+
+
+def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
+    """The rings of every frame's sweep, with one warning per problem (not per frame).
+
+    Rings that do not fit the line model (purity below
+    :data:`~paretocal.features.rings.MIN_PURITY`) are still used, but the user is told which
+    files and what to do: a wrong ring structure makes depth edges noise.
+    """
+    seq = np.random.SeedSequence([settings.search.seed, 1])
+    out = [frame_rings(f, settings.features, np.random.default_rng(child))
+           for f, child in zip(frames, seq.spawn(len(frames)))]
+    notes = sorted({n for r in out for n in r.notes})
+    for n in notes[:3]:
+        log.warning("%s", n)
+    bad = [(f, r) for f, r in zip(frames, out) if r.purity < MIN_PURITY]
+    if bad:
+        f, r = bad[0]
+        hint = ("the cloud is not in the sensor's own frame: give the LiDAR's pose "
+                "(lidar_pose in calib.yaml)" if f.sensor_pose is None else
+                "check lidar_pose in calib.yaml")
+        log.warning("%s: laser rings do not fit a spinning LiDAR (%d rings, %.0f %% of the "
+                    "returns on their ring's cone; %d of %d frames like this); depth edges "
+                    "will be unreliable; %s", f.points_path, r.n_rings, 100 * r.purity,
+                    len(bad), len(frames), hint)
     return out
 
 
@@ -339,8 +370,8 @@ class _Stage:
     """
 
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
-                 settings: Settings, progress=None):
-        feats_all = prepare_features(frames, T_view, settings, progress)
+                 settings: Settings, progress=None, rings: list[Rings] | None = None):
+        feats_all = prepare_features(frames, T_view, settings, progress, rings)
         _check_scene(feats_all, frames, T_view, settings.features.z_min)
         o, z_min = settings.objective, settings.features.z_min
         parts = [f.split(o.holdout) for f in feats_all]
@@ -410,7 +441,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
-    stage = _Stage(frames, T_init, T_init, settings, report("features"))
+    rings = sweep_rings(frames, settings)
+    timings["rings"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    stage = _Stage(frames, T_init, T_init, settings, report("features"), rings)
     feats, scene, objective, cost_model = stage.feats, stage.scene, stage.objective, stage.cost
     n_min, n_max = stage.n_min, stage.n_max
     timings["features"] = time.perf_counter() - t0
@@ -452,7 +486,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             # objective, and that bias grows with the initial error.
             t0 = time.perf_counter()
             T_est = objective.transforms(X[np.argmin(F[:, 0])][None])[0]
-            stage = _Stage(frames, T_est, T_init, settings)
+            stage = _Stage(frames, T_est, T_init, settings, rings=rings)
             feats, scene, objective, cost_model = (stage.feats, stage.scene, stage.objective,
                                                    stage.cost)
             n_min, n_max = stage.n_min, stage.n_max
@@ -516,5 +550,12 @@ def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) 
 def _feature_counts(feats: list[FrameFeatures]) -> dict:
     per = [f.counts() for f in feats]
     total = {g: int(sum(p[g] for p in per)) for g in GROUP_NAMES}
+    summaries = [f.rings for f in feats if f.rings]
+    ring_info = None
+    if summaries:
+        ring_info = {"methods": sorted({s["method"] for s in summaries}),
+                     "min_purity": min(s["purity"] for s in summaries),
+                     "spacing_deg_median": summaries[0]["spacing_deg_median"]}
     return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
-            "total": total, "rings": sorted({f.n_rings for f in feats})}
+            "total": total, "rings": sorted({f.n_rings for f in feats}),
+            "ring_recovery": ring_info}

@@ -15,10 +15,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rings import azimuth, elevation_deg, recover_rings
+from .rings import Rings, azimuth, recover_rings
 
 DEPTH_EDGE, INTENSITY_EDGE, SMOOTH = 0, 1, 2
 GROUP_NAMES = ("depth_edge", "intensity_edge", "smooth")
+
+#: Grazing angle (deg) below which a surface is not trusted to continue across rings: a
+#: surface seen at angle beta changes range by ``r * gap / tan(beta)`` between rings ``gap``
+#: radians apart, so a larger jump is a depth edge. 1.6 deg reproduces, on the 0.42 deg median
+#: ring spacing of an HDL-64E, the ``0.25 r`` rule that was measured best there; on a 16-beam
+#: sensor (2 deg) it asks for ``1.25 r``, so the ground at grazing angles makes no edges.
+GRAZING_MIN_DEG = 1.6
+#: Neighbours along a ring more than this many azimuth steps apart (the sensor's median step)
+#: are not compared: returns are missing in between. On KITTI (0.17 deg steps) this is 1 deg.
+MAX_GAP_STEPS = 6.0
 
 
 @dataclass(eq=False)
@@ -35,12 +45,16 @@ class LidarFeatures:
         Depth jump in metres (depth edges), reflectance jump (intensity edges), 0 (smooth).
     n_rings : int
         Rings recovered from the sweep.
+    source : ndarray, shape (M,), int64
+        Index, in the input points, of the return each feature point comes from (the near
+        return of an edge), e.g. to look up its time.
     """
 
     xyz: np.ndarray
     group: np.ndarray
     strength: np.ndarray
     n_rings: int
+    source: np.ndarray | None = None
 
 
 def _between_rays(p: np.ndarray, q: np.ndarray, r: np.ndarray, t: float) -> np.ndarray:
@@ -52,21 +66,23 @@ def _between_rays(p: np.ndarray, q: np.ndarray, r: np.ndarray, t: float) -> np.n
 
 
 def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
-                   cross_jump_m: float = 0.3, cross_jump_rel: float = 0.25,
+                   cross_jump_m: float = 0.3, cross_jump_rel: float | None = None,
                    ground_tol_m: float | None = None,
-                   intensity_jump: float = 0.3, min_range_m: float = 1.5,
-                   max_range_m: float = 70.0, max_gap_deg: float = 1.0,
+                   intensity_jump: float = 0.5, min_range_m: float = 1.5,
+                   max_range_m: float = 70.0, max_gap_deg: float | None = None,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
                    along_fraction: float = 0.5, cross_fraction: float = 0.5,
                    edge_support: bool = False,
                    rng: np.random.Generator | int | None = 0,
-                   ring: np.ndarray | None = None) -> LidarFeatures:
+                   ring: np.ndarray | Rings | None = None,
+                   ring_spacing_deg: float | None = None) -> LidarFeatures:
     """Extract feature points from one sweep.
 
     Parameters
     ----------
     points : ndarray, shape (N, 4)
-        ``x, y, z`` in metres and reflectance, in scan order when available.
+        ``x, y, z`` in metres in the sensor frame (origin on the spinning axis, z along it)
+        and intensity, in scan order when available.
     depth_jump_m : float
         Minimum range difference to the next return along the ring for a depth edge.
     cross_ring : bool
@@ -74,19 +90,25 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     cross_jump_m, cross_jump_rel : float
         Across rings the far return must be farther by ``max(cross_jump_m, cross_jump_rel * r)``
         (the relative part keeps the ground, seen at grazing angles, from making edges).
+        ``None`` (default) derives ``cross_jump_rel`` from the ring spacing and
+        :data:`GRAZING_MIN_DEG`.
     ground_tol_m : float, optional
         When set, a pair across rings whose two returns both lie within this height of the
         ground (the 5th percentile of z within 30 m) is never an edge, which lets a smaller
         ``cross_jump_rel`` find far horizontal contours without ground artefacts.
     intensity_jump : float
-        Minimum reflectance difference between neighbours on one surface for an intensity edge.
+        Minimum intensity difference between neighbours on one surface for an intensity edge,
+        as a fraction of the sweep's 99th-percentile intensity (so that it means the same on
+        KITTI's 0-1 reflectance, 8-bit and 16-bit intensities).
     min_range_m, max_range_m : float
         Returns outside this range are ignored.
-    max_gap_deg : float
+    max_gap_deg : float, optional
         Neighbours farther apart in azimuth are not compared (missing returns in between).
+        ``None`` (default): :data:`MAX_GAP_STEPS` times the sweep's median azimuth step.
     smooth_ratio : float
         Smooth-surface points kept, as a multiple of the depth edges found (0 keeps none).
-    ring_method : {"auto", "scan", "elevation"}
+    ring_method : {"auto", "scan", "lines", "elevation"}
+        Used when ``ring`` is not given.
     along_fraction, cross_fraction : float
         Where an edge point is placed between the near ray and its far neighbour (0 = on the
         near ray, 0.5 = midway), along a ring and across rings.
@@ -97,9 +119,12 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         jump in range at almost every return and make edges that no image edge matches.
     rng : numpy Generator or seed
         Drives the subsampling of smooth points.
-    ring : ndarray, shape (N,), optional
-        Ring index per point, when already known (for example recovered from the whole sweep
-        before cropping it); recovered with ``ring_method`` otherwise.
+    ring : ndarray, shape (N,), or Rings, optional
+        Ring index per point (-1: none), when already known (for example recovered from the
+        whole sweep before cropping it); recovered with ``ring_method`` otherwise.
+    ring_spacing_deg : float, optional
+        The sensor's median elevation gap between neighbouring rings; taken from ``ring`` when
+        it is a :class:`~paretocal.features.rings.Rings`, else from the rings' elevations.
 
     Returns
     -------
@@ -109,17 +134,29 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     pts = np.asarray(points, dtype=np.float64)
     xyz_all = pts[:, :3]
     rng_all = np.linalg.norm(xyz_all, axis=1)
-    ring = recover_rings(pts, ring_method) if ring is None else np.asarray(ring)
-    n_rings = int(ring.max()) + 1 if len(ring) else 0
-    keep = (rng_all > min_range_m) & (rng_all < max_range_m)
+    if ring is None:
+        ring = recover_rings(pts, ring_method, rng=rng)
+    if isinstance(ring, Rings):
+        if ring_spacing_deg is None and ring.n_rings > 1:
+            ring_spacing_deg = float(np.nanmedian(ring.spacing_deg()))
+        n_rings, ring = ring.n_rings, ring.ring
+    else:
+        ring = np.asarray(ring)
+        n_rings = int(ring.max()) + 1 if len(ring) else 0
+    keep = (rng_all > min_range_m) & (rng_all < max_range_m) & (ring >= 0)
+    src = np.flatnonzero(keep)
     xyz, refl, r, ring = xyz_all[keep], pts[keep, 3], rng_all[keep], ring[keep]
     psi = azimuth(xyz)
     order = np.lexsort((psi, ring))
-    xyz, refl, r, ring, psi = xyz[order], refl[order], r[order], ring[order], psi[order]
+    xyz, refl, r, ring, psi, src = (xyz[order], refl[order], r[order], ring[order], psi[order],
+                                    src[order])
     n = len(xyz)
     if n < 3:
         empty = np.zeros((0, 3))
-        return LidarFeatures(empty, np.zeros(0, np.int8), np.zeros(0), n_rings)
+        return LidarFeatures(empty, np.zeros(0, np.int8), np.zeros(0), n_rings,
+                             np.zeros(0, np.int64))
+    scale = float(np.percentile(pts[:, 3], 99)) if len(pts) else 0.0
+    refl = refl / scale if scale > 0 else np.zeros_like(refl)
 
     # Circular neighbours within each ring (the ring's start follows its end).
     first = np.r_[True, ring[1:] != ring[:-1]]
@@ -129,6 +166,10 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     end_of = end_idx[np.cumsum(first) - 1]
     nxt = np.where(last, start_of, np.arange(n) + 1)
     prv = np.where(first, end_of, np.arange(n) - 1)
+    if max_gap_deg is None:
+        step = np.mod(psi[nxt] - psi, 2 * np.pi)
+        step = step[(step > 0) & (nxt != np.arange(n))]
+        max_gap_deg = MAX_GAP_STEPS * float(np.degrees(np.median(step))) if len(step) else 1.0
     gap = np.radians(max_gap_deg)
     dpsi_n = np.mod(psi[nxt] - psi, 2 * np.pi)
     dpsi_p = np.mod(psi - psi[prv], 2 * np.pi)
@@ -156,19 +197,21 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                                        along_fraction)
     strength = np.where(is_edge, jump, 0.0)
 
+    if cross_jump_rel is None:
+        spacing = ring_spacing_deg if ring_spacing_deg and np.isfinite(ring_spacing_deg) else 0.42
+        cross_jump_rel = np.radians(spacing) / np.tan(np.radians(GRAZING_MIN_DEG))
     if cross_ring:
         on_ground = np.zeros(n, dtype=bool)
         if ground_tol_m is not None:
             near = np.hypot(xyz[:, 0], xyz[:, 1]) < 30.0
             z_ground = np.percentile(xyz[near, 2], 5) if near.any() else xyz[:, 2].min()
             on_ground = xyz[:, 2] < z_ground + ground_tol_m
-        # Rank rings by elevation so that "above" and "below" are geometric neighbours; points
-        # are sorted by (ring, azimuth), so each ring is one contiguous, azimuth-sorted segment.
-        el = elevation_deg(xyz)
+        # Rings are numbered top first, so "above" and "below" are the neighbouring ids present;
+        # points are sorted by (ring, azimuth): each ring is one contiguous, azimuth-sorted
+        # segment.
         ids, seg_start = np.unique(ring, return_index=True)
         seg_end = np.r_[seg_start[1:], n]
-        med = np.array([np.median(el[a:b]) for a, b in zip(seg_start, seg_end)])
-        by_el = np.argsort(-med)                       # segment indices, top ring first
+        by_el = np.arange(len(ids))                    # segment indices, top ring first
         pos_of = np.empty(len(ids), dtype=np.int64)
         pos_of[by_el] = np.arange(len(ids))
         seg_of = np.repeat(np.arange(len(ids)), seg_end - seg_start)
@@ -220,7 +263,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                             np.full(len(int_pos), INTENSITY_EDGE, np.int8),
                             np.full(len(sm_idx), SMOOTH, np.int8)])
     strength = np.concatenate([strength[is_edge], dref[is_int], np.zeros(len(sm_idx))])
-    return LidarFeatures(out_xyz, group, strength, n_rings)
+    source = np.concatenate([src[is_edge], src[is_int], src[sm_idx]]).astype(np.int64)
+    return LidarFeatures(out_xyz, group, strength, n_rings, source)
 
 
 def _nearest_in_segment(key: np.ndarray, psi: np.ndarray, tgt: np.ndarray, start: np.ndarray,

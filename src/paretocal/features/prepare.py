@@ -15,10 +15,11 @@ import numpy as np
 
 from ..camera import Camera, in_image, project
 from ..config import FeatureSettings, ObjectiveSettings
+from ..geometry import invert
 from ..io.frame import Frame
 from .image import ImageFeatures, image_features
 from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
-from .rings import recover_rings
+from .rings import Rings, recover_rings
 
 CROP_EXTRA_PX = 150.0
 #: Points projected at a time when a sweep is cropped to the view: the projection's float64
@@ -41,6 +42,8 @@ class FrameFeatures:
     weight : ndarray, shape (M,), float64
         Per-point weight in the objective.
     n_rings : int
+    rings : dict, optional
+        :meth:`Rings.summary` of the sweep (method, count, purity, notes).
     """
 
     name: str
@@ -50,6 +53,7 @@ class FrameFeatures:
     group: np.ndarray
     weight: np.ndarray
     n_rings: int
+    rings: dict | None = None
 
     def split(self, holdout: float) -> tuple["FrameFeatures", "FrameFeatures"]:
         """The search part (the first points of the order) and a held-out tail.
@@ -60,9 +64,9 @@ class FrameFeatures:
         m = len(self.xyz)
         cut = m - int(round(holdout * m))
         head = FrameFeatures(self.name, self.camera, self.image, self.xyz[:cut],
-                             self.group[:cut], self.weight[:cut], self.n_rings)
+                             self.group[:cut], self.weight[:cut], self.n_rings, self.rings)
         tail = FrameFeatures(self.name, self.camera, self.image, self.xyz[cut:],
-                             self.group[cut:], self.weight[cut:], self.n_rings)
+                             self.group[cut:], self.weight[cut:], self.n_rings, self.rings)
         return head, tail
 
     def counts(self) -> dict[str, int]:
@@ -91,24 +95,53 @@ def stratified_order(group: np.ndarray, cell: np.ndarray, rng: np.random.Generat
     return perm[np.argsort(key, kind="stable")]
 
 
+def sensor_points(frame: Frame) -> np.ndarray:
+    """The frame's points in the LiDAR sensor's own frame, (N, 4) float64 (intensity kept).
+
+    Ring geometry (ranges, azimuths, elevations) is about the sensor origin and spinning axis;
+    clouds stored in a vehicle frame carry the sensor's pose (``Frame.sensor_pose``).
+    """
+    pts = np.asarray(frame.points, dtype=np.float64)
+    if frame.sensor_pose is None:
+        return pts
+    inv = invert(frame.sensor_pose)
+    out = pts.copy()
+    out[:, :3] = pts[:, :3] @ inv[:3, :3].T + inv[:3, 3]
+    return out
+
+
+def frame_rings(frame: Frame, features: FeatureSettings,
+                rng: np.random.Generator | int | None = 0) -> Rings:
+    """The rings of a frame's sweep: the file's ring field when plausible, else recovered
+    (see :func:`~paretocal.features.rings.recover_rings`)."""
+    return recover_rings(sensor_points(frame), features.ring_method, ring_field=frame.ring,
+                         rng=rng, source=str(frame.points_path))
+
+
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
-                  objective: ObjectiveSettings, rng: np.random.Generator) -> FrameFeatures:
+                  objective: ObjectiveSettings, rng: np.random.Generator,
+                  rings: Rings | None = None) -> FrameFeatures:
     """Extract, filter and order the features of one frame.
 
     Only feature points that project into the image grown by ``view_margin_px`` at ``T_init``
     are kept: the objective compares what both sensors see, and points far outside the view
-    would reward poses that pull unseen structure into the image.
+    would reward poses that pull unseen structure into the image. ``rings`` (from
+    :func:`frame_rings`) saves recovering them again.
     """
     img = image_features(frame.image, features.blur_sigma, features.canny_low,
                          features.canny_high, objective.truncation_px, features.min_edge_px)
-    # Rings come from the whole sweep (its scan order); edges are then found only in the part
-    # of the sweep near the view, a quarter of the points (a wider margin than the view's, so
-    # that no neighbour of a kept point is lost).
-    ring = recover_rings(frame.points, features.ring_method)
+    # Rings come from the whole sweep; edges are then found only in the part of the sweep
+    # near the view, a quarter of the points (a wider margin than the view's, so that no
+    # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.
+    if rings is None:
+        rings = frame_rings(frame, features, rng)
+    spacing = rings.spacing_deg()
     near = _near_view(frame.points, frame.camera, T_init, features.z_min,
                       features.view_margin_px + CROP_EXTRA_PX)
+    pts_s = sensor_points(frame)
     lf: LidarFeatures = lidar_features(
-        frame.points[near], ring=ring[near],
+        pts_s[near], ring=rings.ring[near],
+        ring_spacing_deg=float(np.nanmedian(spacing)) if np.isfinite(spacing).any() else None,
         depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
         cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
         ground_tol_m=features.ground_tol_m,
@@ -117,19 +150,23 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
         smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,
         ring_method=features.ring_method, along_fraction=features.along_fraction,
         cross_fraction=features.cross_fraction, edge_support=features.edge_support, rng=rng)
+    xyz_all = lf.xyz
+    if frame.sensor_pose is not None:
+        P = np.asarray(frame.sensor_pose, dtype=np.float64)
+        xyz_all = xyz_all @ P[:3, :3].T + P[:3, 3]
     keep = _wanted_groups(lf.group, objective)
-    uv, z, _ = project(lf.xyz, frame.camera, T_init, features.z_min)
+    uv, z, _ = project(xyz_all, frame.camera, T_init, features.z_min)
     keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,
                                             features.view_margin_px)
-    xyz, group, uv = lf.xyz[keep], lf.group[keep], uv[keep]
+    xyz, group, uv = xyz_all[keep], lf.group[keep], uv[keep]
     weight = point_weights(lf.strength[keep], group, features.edge_weight,
-                           np.linalg.norm(xyz, axis=1))
+                           np.linalg.norm(lf.xyz[keep], axis=1))
     gx, gy = features.grid
     cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
     cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
     order = stratified_order(group, cv * gx + cu, rng)
     return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], weight[order],
-                         lf.n_rings)
+                         rings.n_rings, rings.summary())
 
 
 def _near_view(points: np.ndarray, camera: Camera, T: np.ndarray, z_min: float,

@@ -1,23 +1,139 @@
-"""Laser ring recovery for spinning LiDARs whose files carry no ring field (KITTI ``.bin``).
+"""Laser rings of a spinning LiDAR: read from the file, or recovered from the geometry.
 
-Two methods:
+A spinning LiDAR's laser ``k`` sweeps a cone about the sensor's axis. Seen from the sensor
+origin, a return at horizontal distance ``d`` from the axis and height ``z`` satisfies::
 
-* ``scan``: KITTI writes each laser's sweep in turn, azimuth increasing; a new ring starts where
-  the azimuth wraps, i.e. drops by more than pi. Exact on unshuffled KITTI sweeps.
-* ``elevation``: cluster the elevation angles (histogram peaks at 0.05 deg, peaks closer than
-  0.12 deg merged). Works on shuffled or cropped clouds; less exact for close points, whose
-  elevation seen from the sensor origin is shifted by the lasers' mounting offsets.
+    z / d = a_k + h_k / d        (a_k = tan of the laser's elevation, h_k its height offset)
 
-``auto`` tries ``scan`` and falls back to ``elevation`` when the scan order does not look like
-rings (too many rings, or rings that do not span the sweep).
+a straight line in the plane ``(1 / d, z / d)``. ``h_k`` is the height of the laser's own
+origin above the sensor origin (up to 0.2 m on an HDL-64E, 0 on sensors whose points are
+computed from one origin); it shifts the elevation of near returns by ``h / d`` (1 deg at 10 m
+for 0.2 m), which is why clustering elevation angles alone fails on close, dense rings. The
+line model holds for any beam count, spacing (uniform or not) and storage order.
+
+Methods (``method`` of :func:`recover_rings`):
+
+* ``field``: the file's ring field (``ring``, ``laser_id``, ``channel``, ``line``), checked.
+* ``scan``: the file order, one laser after another (KITTI's ``.bin``): a new ring starts where
+  the azimuth wraps (drops by more than pi). Exact and cheap when the order is like that.
+* ``lines``: order-free. A Hough transform over ``(h, a)`` finds the strongest line, its
+  points are taken (within a tolerance that follows from the line's own scatter) and their
+  votes removed, and so on until no line has enough points; then k-lines refinement, removal
+  of lines that other lines already explain, and merging of one laser split in two.
+* ``elevation``: elevation-angle histogram clustering (kept for comparison: wrong for near
+  returns of lasers with height offsets).
+* ``auto`` (default): ``field`` when the file has one and it is plausible; else ``scan`` when
+  every scan-order ring fits its line; else ``lines``.
+
+Every method's result is checked against the line model (:func:`ring_purity`): the share of
+points within tolerance of their ring's line. The geometry is taken about the sensor origin:
+clouds stored in another frame must be brought into the sensor frame first (see
+:mod:`paretocal.features.sensor`).
 """
 
 from __future__ import annotations
 
+import logging
+from dataclasses import dataclass, field
+
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
-MAX_RINGS = 128
+log = logging.getLogger(__name__)
+
+#: More rings than any spinning LiDAR has (the largest have 128): a sign of a wrong method.
+MAX_RINGS = 256
+#: Returns closer to the axis than this (m) are ignored for fitting (sensor housing, roof).
+MIN_AXIS_DISTANCE_M = 0.5
+#: Hough grid: ``a`` bins (tan elevation) and height offsets ``h`` (m). The a bin (0.011 deg)
+#: is far below the closest beam spacing of real sensors (about 0.1 deg); |h| up to 0.4 m
+#: covers every laser head (HDL-64E: 0.21 m).
+HOUGH_A_BIN = 0.0002
+HOUGH_H_STEP = 0.0025
+HOUGH_H_MAX = 0.4
+HOUGH_TAN_MAX = 1.2             # +-50 deg of elevation
+HOUGH_SAMPLE = 40000            # points voting (a seeded subsample)
+#: A line must gather this share of the voting points (and at least MIN_RING_POINTS): a
+#: 256-beam sensor's smallest ring still holds several times more.
+MIN_RING_SHARE = 0.0008
+MIN_RING_POINTS = 15
+#: Tolerance of a line in units of its robust scatter (MAD-based sigma).
+LINE_TOL_SIGMA = 5.0
+#: Two lines closer than this many pooled sigmas at their typical range are one laser split in
+#: two (real neighbouring lasers lie 25 or more sigmas apart on every sensor measured).
+MERGE_SIGMA = 10.0
+#: ... or when they stay within this share of the gap to the next rings at every distance
+#: (the closest distinct lasers measured, two of an HDL-64E, stay at 0.2 of their outer gaps).
+MERGE_GAP_SHARE = 0.1
+#: A ring set is plausible when most points lie within tolerance of their ring's line.
+MIN_PURITY = 0.9
+#: Rings are numbered by their elevation seen at this horizontal distance (m): lasers with
+#: different height offsets can swap order between near and far, and "the ring above" should
+#: mean the geometric neighbour where most edges are found.
+ORDER_DISTANCE_M = 10.0
+
+
+def ring_order(a: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Indices of rings ``(a, h)`` from the top down (NaN lines last), shape (R,)."""
+    key = np.where(np.isfinite(a), a + np.nan_to_num(h) / ORDER_DISTANCE_M, -np.inf)
+    return np.argsort(-key, kind="stable")
+
+
+@dataclass(eq=False)
+class Rings:
+    """Ring labels of one sweep and the line model behind them.
+
+    Attributes
+    ----------
+    ring : ndarray, shape (N,), int32
+        Ring per point, ``0 .. n_rings - 1`` ordered from the top (highest elevation) down;
+        ``-1`` for points that belong to no ring (too close to the axis, or far from every
+        line).
+    n_rings : int
+    tan_elevation : ndarray, shape (n_rings,)
+        ``a_k``: tangent of each ring's elevation (far-field), top first.
+    offset_m : ndarray, shape (n_rings,)
+        ``h_k`` in metres.
+    method : str
+        ``"field"``, ``"scan"``, ``"lines"`` or ``"elevation"``.
+    purity : float
+        Share of the points (beyond :data:`MIN_AXIS_DISTANCE_M`) within tolerance of their
+        ring's line.
+    notes : list of str
+        What was tried and why it was not used, for the user.
+    """
+
+    ring: np.ndarray
+    n_rings: int
+    tan_elevation: np.ndarray
+    offset_m: np.ndarray
+    method: str
+    purity: float
+    notes: list = field(default_factory=list)
+
+    @property
+    def elevation_deg(self) -> np.ndarray:
+        """Far-field elevation of each ring in degrees, shape (n_rings,)."""
+        return np.degrees(np.arctan(self.tan_elevation))
+
+    def spacing_deg(self) -> np.ndarray:
+        """Elevation gap to the neighbouring ring(s) in degrees, shape (n_rings,): the smaller
+        of the gaps above and below (the only gap for the top and bottom rings)."""
+        el = self.elevation_deg
+        if len(el) < 2:
+            return np.full(len(el), np.nan)
+        gap = np.abs(np.diff(el))
+        return np.minimum(np.r_[gap[0], gap], np.r_[gap, gap[-1]])
+
+    def summary(self) -> dict:
+        """JSON-ready description (method, count, purity, spacing)."""
+        sp = self.spacing_deg()
+        return {"method": self.method, "n_rings": int(self.n_rings),
+                "purity": round(float(self.purity), 4),
+                "spacing_deg_median": None if not np.isfinite(sp).any()
+                else round(float(np.nanmedian(sp)), 4),
+                "unassigned": round(float(np.mean(self.ring < 0)), 4) if len(self.ring) else 0.0,
+                "notes": list(self.notes)}
 
 
 def azimuth(points: np.ndarray) -> np.ndarray:
@@ -28,6 +144,14 @@ def azimuth(points: np.ndarray) -> np.ndarray:
 def elevation_deg(points: np.ndarray) -> np.ndarray:
     """Elevation angle in degrees seen from the sensor origin, shape (N,)."""
     return np.degrees(np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1])))
+
+
+def _line_coords(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(z / d, 1 / d, usable)`` per point, d the distance from the sensor's z axis."""
+    d = np.hypot(points[:, 0], points[:, 1])
+    ok = d > MIN_AXIS_DISTANCE_M
+    safe = np.where(ok, d, 1.0)
+    return np.where(ok, points[:, 2] / safe, 0.0), np.where(ok, 1.0 / safe, 0.0), ok
 
 
 def rings_from_scan_order(points: np.ndarray, min_ring_points: int = 50) -> np.ndarray:
@@ -54,7 +178,7 @@ def rings_from_scan_order(points: np.ndarray, min_ring_points: int = 50) -> np.n
 
 def rings_from_elevation(points: np.ndarray, bin_deg: float = 0.05,
                          merge_deg: float = 0.12) -> np.ndarray:
-    """Ring index per point from clustered elevation angles (order-free).
+    """Ring index per point from clustered elevation angles (order-free, no height offsets).
 
     Returns
     -------
@@ -81,25 +205,326 @@ def rings_from_elevation(points: np.ndarray, bin_deg: float = 0.05,
     return np.searchsorted(-bounds, -el).astype(np.int32)
 
 
-def recover_rings(points: np.ndarray, method: str = "auto") -> np.ndarray:
-    """Ring index per point, shape (N,) int32 (see the module docstring for ``method``)."""
-    if method not in ("auto", "scan", "elevation"):
+# --- the line model ------------------------------------------------------------------------------
+
+def _fit_line(te: np.ndarray, inv: np.ndarray) -> tuple[float, float]:
+    """Least-squares ``te = a + h inv``; h is 0 when the points span no range of distances."""
+    if len(te) < 2 or np.ptp(inv) < 1e-6:
+        return float(np.mean(te)) if len(te) else 0.0, 0.0
+    X = np.column_stack([np.ones(len(te)), inv])
+    a, h = np.linalg.lstsq(X, te, rcond=None)[0]
+    return float(a), float(h)
+
+
+def _sigma(r: np.ndarray) -> float:
+    """Robust scatter (MAD-based sigma) of absolute residuals, floored at float32 precision."""
+    return float(1.4826 * np.median(r)) + 1e-7 if len(r) else 1e-7
+
+
+def fit_ring_lines(te: np.ndarray, inv: np.ndarray, labels: np.ndarray,
+                   n_rings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fit each labelled ring's line robustly.
+
+    Returns ``a``, ``h``, ``sigma`` of shape (n_rings,) (NaN for rings with fewer than two
+    points).
+    """
+    a = np.full(n_rings, np.nan)
+    h = np.full(n_rings, np.nan)
+    s = np.full(n_rings, np.nan)
+    order = np.argsort(labels, kind="stable")
+    lab = labels[order]
+    bounds = np.searchsorted(lab, np.arange(n_rings + 1))
+    for k in range(n_rings):
+        idx = order[bounds[k]:bounds[k + 1]]
+        if len(idx) < 2:
+            continue
+        ak, hk = _fit_line(te[idx], inv[idx])
+        r = np.abs(te[idx] - ak - hk * inv[idx])
+        sk = _sigma(r)
+        inl = r < LINE_TOL_SIGMA * sk
+        if inl.sum() >= 2:
+            ak, hk = _fit_line(te[idx][inl], inv[idx][inl])
+            sk = _sigma(np.abs(te[idx][inl] - ak - hk * inv[idx][inl]))
+        a[k], h[k], s[k] = ak, hk, sk
+    return a, h, s
+
+
+def ring_purity(points: np.ndarray, ring: np.ndarray) -> float:
+    """Share of the points (beyond the axis distance limit) within tolerance of their ring's
+    fitted line; points without a ring (-1) count as impure.
+
+    The tolerance is a line's own scatter (:data:`LINE_TOL_SIGMA` sigmas, never below the
+    typical ring's) but at most a quarter of the gap to the neighbouring rings: a "ring" that
+    mixes several lasers has a large scatter and nearly coincident neighbours, so its points
+    do not count however widely they scatter.
+    """
+    te, inv, ok = _line_coords(np.asarray(points, dtype=np.float64))
+    ring = np.asarray(ring)
+    n = int(ring.max()) + 1 if len(ring) and ring.max() >= 0 else 0
+    if not ok.any() or n < 2:
+        return 0.0
+    sel = ok & (ring >= 0)
+    lab = ring[sel]
+    a, h, s = fit_ring_lines(te[sel], inv[sel], lab, n)
+    good = np.isfinite(a)
+    if good.sum() < 2:
+        return 0.0
+    typical = float(np.median(inv[sel]))
+    at = np.where(good, a + np.nan_to_num(h) * typical, np.nan)
+    order = np.argsort(at)[: good.sum()]                 # NaNs sort last
+    gaps = np.diff(at[order])
+    spacing = np.full(n, np.nan)
+    spacing[order] = np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf])
+    tol = np.minimum(LINE_TOL_SIGMA * np.maximum(s, np.nanmedian(s)), 0.25 * spacing)
+    r = np.abs(te[sel] - a[lab] - h[lab] * inv[sel])
+    inside = good[lab] & (r < np.nan_to_num(tol[lab], nan=0.0))
+    return float(inside.sum() / ok.sum())
+
+
+def _votes(te: np.ndarray, inv: np.ndarray, H: np.ndarray, n_a: int) -> np.ndarray:
+    """Flat accumulator cells voted by each point for every h (the line ``a = te - h inv``)."""
+    ia = np.floor((te[None, :] - H[:, None] * inv[None, :] + HOUGH_TAN_MAX)
+                  / HOUGH_A_BIN).astype(np.int64)
+    ok = (ia >= 0) & (ia < n_a)
+    return (np.arange(len(H))[:, None] * n_a + ia)[ok]
+
+
+def _extract_lines(te: np.ndarray, inv: np.ndarray) -> list[tuple[float, float, float]]:
+    """Greedy Hough extraction: strongest line first, its points' votes removed, repeat.
+
+    Returns ``(a, h, sigma)`` per line found.
+    """
+    H = np.arange(-HOUGH_H_MAX, HOUGH_H_MAX + 0.5 * HOUGH_H_STEP, HOUGH_H_STEP)
+    n_a = int(np.ceil(2 * HOUGH_TAN_MAX / HOUGH_A_BIN)) + 1
+    size = len(H) * n_a
+
+    def smoothed(cells):
+        # Votes of a 3-bin box along a, so that a line straddling two bins is one peak.
+        acc = np.bincount(cells, minlength=size).astype(np.float32)
+        sm = acc.copy()
+        sm[1:] += acc[:-1]
+        sm[:-1] += acc[1:]
+        return sm
+
+    acc = smoothed(_votes(te, inv, H, n_a))
+    alive = np.ones(len(te), dtype=bool)
+    min_votes = max(MIN_RING_POINTS, MIN_RING_SHARE * len(te))
+    lines = []
+    # Tolerance around a Hough peak: two a bins plus the error of h quantised to its step.
+    tol0 = 2 * HOUGH_A_BIN + 0.5 * HOUGH_H_STEP * inv
+    for _ in range(4 * MAX_RINGS):
+        k = int(np.argmax(acc))
+        if acc[k] < min_votes:
+            break
+        ih, ia = divmod(k, n_a)
+        a, h = (ia + 0.5) * HOUGH_A_BIN - HOUGH_TAN_MAX, H[ih]
+        m = alive & (np.abs(te - a - h * inv) < tol0)
+        for _ in range(3):
+            if m.sum() < min_votes:
+                break
+            a, h = _fit_line(te[m], inv[m])
+            r = np.abs(te - a - h * inv)
+            s = _sigma(r[m])
+            m = alive & (r < np.minimum(LINE_TOL_SIGMA * s, tol0))
+        if m.sum() < min_votes:
+            # Not a line: clear the peak so that the next one is looked at.
+            acc[max(k - 1, 0):k + 2] = 0
+            continue
+        lines.append((a, h, _sigma(np.abs(te[m] - a - h * inv[m]))))
+        acc -= smoothed(_votes(te[m], inv[m], H, n_a))
+        alive &= ~m
+    return lines
+
+
+def _k_lines(te: np.ndarray, inv: np.ndarray, a: np.ndarray, h: np.ndarray,
+             iters: int, min_points: int):
+    """Assign every point to its nearest line and refit; drop lines left with few points."""
+    s = np.full(len(a), np.nan)
+    for _ in range(iters):
+        lab = np.abs(te[:, None] - (a[None, :] + h[None, :] * inv[:, None])).argmin(axis=1)
+        a, h, s = fit_ring_lines(te, inv, lab, len(a))
+        keep = np.isfinite(a) & (np.bincount(lab, minlength=len(a)) >= min_points)
+        a, h, s = a[keep], h[keep], s[keep]
+    return a, h, s
+
+
+def _prune(te: np.ndarray, inv: np.ndarray, a: np.ndarray, h: np.ndarray, s: np.ndarray):
+    """Remove lines whose points other lines explain (a mixture of two lasers' returns)."""
+    res = np.abs(te[:, None] - (a[None, :] + h[None, :] * inv[:, None]))
+    lab = res.argmin(axis=1)
+    counts = np.bincount(lab, minlength=len(a))
+    alive = np.ones(len(a), dtype=bool)
+    tol = LINE_TOL_SIGMA * np.maximum(s, np.median(s))
+    for k in np.argsort(counts):
+        m = lab == k
+        others = np.flatnonzero(alive & (np.arange(len(a)) != k))
+        if len(others) == 0:
+            break
+        if not m.any():
+            alive[k] = False
+            continue
+        rk = res[m][:, others] / tol[others][None, :]
+        if np.mean(rk.min(axis=1) < 1.0) >= 0.7:
+            alive[k] = False
+            lab[m] = others[rk.argmin(axis=1)]
+    return a[alive], h[alive]
+
+
+def _merge_split(te: np.ndarray, inv: np.ndarray, a: np.ndarray, h: np.ndarray,
+                 s: np.ndarray, min_points: int):
+    """Merge neighbouring lines that are one laser split in two.
+
+    Two neighbouring lines are one laser when they are closer than :data:`MERGE_SIGMA` pooled
+    sigmas at their typical distance, or when, over the whole range of distances seen, they
+    stay closer to each other than :data:`MERGE_GAP_SHARE` of the gap to the next lines (the
+    near returns of a laser can follow a slightly different line than its far returns).
+    """
+    lo, hi = np.percentile(inv, [1, 99])
+    while len(a) > 2:
+        lab = np.abs(te[:, None] - (a[None, :] + h[None, :] * inv[:, None])).argmin(axis=1)
+        typical = np.array([np.median(inv[lab == k]) if (lab == k).any() else np.median(inv)
+                            for k in range(len(a))])
+        order = ring_order(a, h)
+        a, h, s, typical = a[order], h[order], s[order], typical[order]
+        pooled = np.sqrt(0.5 * (s[:-1] ** 2 + s[1:] ** 2))
+        at = 0.5 * (typical[:-1] + typical[1:])
+        sep = np.abs((a[:-1] - a[1:]) + (h[:-1] - h[1:]) * at) / pooled
+        # Largest separation of each neighbouring pair over the range, and the smallest gap
+        # between a pair and the lines on either side of it.
+        ends = np.array([lo, hi])
+        gap = (a[:-1, None] - a[1:, None]) + (h[:-1, None] - h[1:, None]) * ends[None, :]
+        sep_max = np.abs(gap).max(axis=1)
+        gap_min = np.abs(gap).min(axis=1)
+        outer = np.minimum(np.r_[np.inf, gap_min[:-1]], np.r_[gap_min[1:], np.inf])
+        score = np.minimum(sep / MERGE_SIGMA, sep_max / (MERGE_GAP_SHARE * outer))
+        k = int(np.argmin(score))
+        if score[k] >= 1.0:
+            break
+        # Drop the pair's weaker line; the k-lines pass gives its points to the stronger one.
+        counts = np.bincount(np.abs(te[:, None] - (a[None, :] + h[None, :] * inv[:, None]))
+                             .argmin(axis=1), minlength=len(a))
+        drop = k if counts[k] < counts[k + 1] else k + 1
+        keep = np.arange(len(a)) != drop
+        a, h, s = _k_lines(te, inv, a[keep], h[keep], 2, min_points)
+    return a, h, s
+
+
+def rings_from_lines(points: np.ndarray, rng: np.random.Generator | int | None = 0) -> Rings:
+    """Order-free ring recovery from the line model (see the module docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3+)
+        The sweep in the sensor frame (metres).
+    rng : numpy Generator or seed
+        Drives the subsample of points that vote in the Hough transform.
+
+    Returns
+    -------
+    Rings
+    """
+    rng = np.random.default_rng(rng)
+    pts = np.asarray(points, dtype=np.float64)[:, :3]
+    te, inv, ok = _line_coords(pts)
+    idx = np.flatnonzero(ok)
+    ring = np.full(len(pts), -1, dtype=np.int32)
+    if len(idx) < MIN_RING_POINTS:
+        return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
+                     [f"only {len(idx)} returns beyond {MIN_AXIS_DISTANCE_M} m of the axis"])
+    sample = np.sort(rng.choice(idx, min(len(idx), HOUGH_SAMPLE), replace=False))
+    lines = _extract_lines(te[sample], inv[sample])
+    if not lines:
+        return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
+                     ["no laser ring found in the line model"])
+    a0, h0, _ = (np.array(v) for v in zip(*lines))
+    min_points = max(MIN_RING_POINTS, int(MIN_RING_SHARE * len(sample)))
+    ts, ivs = te[sample], inv[sample]
+    a, h, s = _k_lines(ts, ivs, a0, h0, 3, min_points)
+    a, h = _prune(ts, ivs, a, h, s)
+    a, h, s = _k_lines(ts, ivs, a, h, 2, min_points)
+    a, h, s = _merge_split(ts, ivs, a, h, s, min_points)
+    # Label every point: nearest line, within tolerance.
+    te_u, inv_u = te[idx], inv[idx]
+    res = np.abs(te_u[:, None] - (a[None, :] + h[None, :] * inv_u[:, None]))
+    lab = res.argmin(axis=1)
+    tol = LINE_TOL_SIGMA * np.maximum(s, np.median(s))
+    within = res[np.arange(len(idx)), lab] < tol[lab] * 2.0
+    order = ring_order(a, h)
+    rank = np.empty(len(order), dtype=np.int32)
+    rank[order] = np.arange(len(order), dtype=np.int32)
+    ring[idx[within]] = rank[lab[within]]
+    purity = float(within.mean()) * len(idx) / max(ok.sum(), 1)
+    return Rings(ring, len(a), a[order], h[order], "lines", purity)
+
+
+# --- choosing a method ---------------------------------------------------------------------------
+
+def _as_rings(points: np.ndarray, ring: np.ndarray, method: str, notes=()) -> Rings:
+    """Wrap labels into :class:`Rings`, renumbered top first, with their line model."""
+    pts = np.asarray(points, dtype=np.float64)[:, :3]
+    ring = np.asarray(ring).astype(np.int64)
+    te, inv, ok = _line_coords(pts)
+    valid = ring >= 0
+    ids, inverse = np.unique(ring[valid], return_inverse=True)
+    lab = np.full(len(ring), -1, dtype=np.int64)
+    lab[valid] = inverse
+    n = len(ids)
+    sel = ok & valid
+    a, h, _ = fit_ring_lines(te[sel], inv[sel], lab[sel], n) if n else (np.zeros(0),) * 3
+    order = ring_order(a, h)
+    rank = np.empty(n, dtype=np.int32)
+    rank[order] = np.arange(n, dtype=np.int32)
+    out = np.where(valid, rank[np.maximum(lab, 0)], -1).astype(np.int32)
+    purity = ring_purity(pts, out) if n else 0.0
+    return Rings(out, n, a[order], h[order], method, purity, list(notes))
+
+
+def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarray | None = None,
+                  rng: np.random.Generator | int | None = 0, source: str = "") -> Rings:
+    """Rings of one sweep (see the module docstring for ``method``).
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3+)
+        The sweep in the sensor frame (metres), in the file's order.
+    method : {"auto", "field", "scan", "lines", "elevation"}
+    ring_field : ndarray, shape (N,), optional
+        The file's ring values.
+    rng : numpy Generator or seed
+        For the ``lines`` method's subsample.
+    source : str
+        The file, named in notes and warnings.
+
+    Returns
+    -------
+    Rings
+        ``notes`` says what was tried and why the result was chosen.
+    """
+    if method not in ("auto", "field", "scan", "lines", "elevation"):
         raise ValueError(f"unknown ring method {method!r}")
+    where = f"{source}: " if source else ""
+    notes: list[str] = []
+    pts = np.asarray(points, dtype=np.float64)[:, :3]
+    if method in ("auto", "field") and ring_field is not None:
+        r = _as_rings(pts, ring_field, "field")
+        if method == "field" or (2 <= r.n_rings <= MAX_RINGS and r.purity >= MIN_PURITY):
+            return r
+        notes.append(f"{where}the ring field gives {r.n_rings} rings with purity "
+                     f"{r.purity:.2f} (below {MIN_PURITY}); rings recovered from the geometry "
+                     "instead")
+    elif method == "field":
+        raise ValueError("ring method 'field' needs a ring field")
+    if method == "elevation":
+        return _as_rings(pts, rings_from_elevation(pts), "elevation")
     if method in ("auto", "scan"):
-        ring = rings_from_scan_order(points)
-        if method == "scan" or _looks_like_rings(points, ring):
-            return ring
-    return rings_from_elevation(points)
-
-
-def _looks_like_rings(points: np.ndarray, ring: np.ndarray) -> bool:
-    """Scan-order rings are plausible: not too many, and most of them span most of the sweep."""
-    n = int(ring.max()) + 1
-    if n > MAX_RINGS or n < 2:
-        return False
-    psi = azimuth(points)
-    order = np.argsort(ring, kind="stable")
-    r, p = ring[order], psi[order]
-    starts = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
-    span = np.maximum.reduceat(p, starts) - np.minimum.reduceat(p, starts)
-    return np.median(span) > np.pi
+        scan = rings_from_scan_order(pts)
+        n = int(scan.max()) + 1
+        if method == "scan":
+            return _as_rings(pts, scan, "scan")
+        if 2 <= n <= MAX_RINGS:
+            r = _as_rings(pts, scan, "scan", notes)
+            if r.purity >= MIN_PURITY:
+                return r
+    r = rings_from_lines(pts, rng)
+    r.notes = notes + r.notes
+    return r
