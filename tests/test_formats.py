@@ -8,6 +8,7 @@ import shlex
 from types import SimpleNamespace
 
 import cv2
+import lzf
 import numpy as np
 import pytest
 import yaml
@@ -31,7 +32,11 @@ _PCD_TYPE = {"f": "F", "u": "U", "i": "I"}
 
 def pcd_bytes(cols: list[tuple[str, np.ndarray]], data: str = "binary", width=None,
               height: int = 1) -> bytes:
-    """A PCD file written by hand: one field per column, little endian, PCL's header order."""
+    """A PCD file written by hand: one field per column, little endian, PCL's header order.
+
+    ``data`` is ascii (every value written so that it reads back exactly), binary or
+    binary_compressed (PCL's field-major LZF block after two uint32 size words).
+    """
     n = len(cols[0][1])
     arr = np.zeros(n, dtype=[(f"c{j}", "<" + c.dtype.str[1:]) for j, (_, c) in enumerate(cols)])
     for j, (_, c) in enumerate(cols):
@@ -44,12 +49,21 @@ def pcd_bytes(cols: list[tuple[str, np.ndarray]], data: str = "binary", width=No
             f"COUNT {' '.join('1' for _ in cols)}\n"
             f"WIDTH {width}\nHEIGHT {height}\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n")
     if data == "ascii":
-        body = "".join(" ".join(f"{v:.9g}" for v in row) + "\n" for row in arr.tolist())
-        return (head + body).encode()
+        return (head + _ascii_rows(arr)).encode()
+    if data == "binary_compressed":
+        raw = b"".join(c.astype("<" + c.dtype.str[1:]).tobytes() for _, c in cols)
+        packed = lzf.compress(raw)
+        return head.encode() + np.array([len(packed), len(raw)], "<u4").tobytes() + packed
     return head.encode() + arr.tobytes()
 
 
-_PLY_TYPE = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i4": "int"}
+def _ascii_rows(arr: np.ndarray) -> str:
+    """Records as text lines; repr keeps every float64 (and float32) and integer exact."""
+    return "".join(" ".join(map(repr, row)) + "\n" for row in arr.tolist())
+
+
+_PLY_TYPE = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i4": "int",
+             "i1": "char", "i2": "short", "u4": "uint"}
 
 
 def ply_bytes(cols: list[tuple[str, np.ndarray]], fmt: str = "binary_little_endian",
@@ -72,8 +86,7 @@ def ply_bytes(cols: list[tuple[str, np.ndarray]], fmt: str = "binary_little_endi
     text = "\n".join(head) + "\n"
     if fmt == "ascii":
         pre = "3 1 2 3\n0\n" if before else ""
-        body = "".join(" ".join(f"{v:.9g}" for v in row) + "\n" for row in arr.tolist())
-        return (text + pre + body + ("3 0 1 2\n" if face else "")).encode()
+        return (text + pre + _ascii_rows(arr) + ("3 0 1 2\n" if face else "")).encode()
     tail = b""
     if face:
         tail = np.array([3], endian + "u1").tobytes() + np.array([0, 1, 2], endian + "i4").tobytes()
@@ -124,7 +137,8 @@ class TestPcd:
         assert got.dtype == np.float32 and got.shape == pts.shape
         np.testing.assert_array_equal(got, pts if with_intensity else no_intensity(pts))
 
-    @pytest.mark.parametrize("name", ["intensity", "i", "reflectance", "Intensity"])
+    @pytest.mark.parametrize("name", ["intensity", "i", "reflectance", "Intensity",
+                                      "reflectivity", "signal"])
     def test_intensity_field_names_and_other_fields(self, tmp_path, pts, name):
         sub = pts[::50]
         ring = (np.arange(len(sub)) % 64).astype(np.uint16)

@@ -1,6 +1,38 @@
 """Readers for the files a frame is made of: LiDAR sweeps, images, calibration text and YAML.
 
 Every failure raises :class:`~paretocal.errors.InputError` naming the file and what is wrong.
+
+Point clouds
+------------
+:func:`read_cloud` reads ``.pcd`` (PCL: ascii, binary, binary_compressed; every PCD integer and
+float type), ``.ply`` (ascii, binary little or big endian), ``.npy`` (a plain N x 3 / N x 4
+array, or a record array with named fields) and headerless ``.bin`` files (see
+:data:`BIN_LAYOUTS`). Besides ``x, y, z`` it keeps three optional fields, matched by name
+without regard to case; within each list the first name the file has wins:
+
+=========  ===================================================================
+intensity  ``intensity``, ``reflectivity``, ``signal``, ``i``, ``reflectance``
+ring       ``ring``, ``laser_id``, ``channel``, ``line``
+time       ``time``, ``t``, ``timestamp``, ``offset_time``
+=========  ===================================================================
+
+(Ouster clouds hold both ``reflectivity`` and ``signal``: the calibrated ``reflectivity`` is
+preferred.) Other fields are ignored.
+
+Ring numbers must be whole numbers 0..255; gaps (only 0, 2, 4, ...) are kept as they are.
+
+Time is converted to seconds by a rule that looks at the data, because files do not state the
+unit: a LiDAR sweep lasts between a few and a few hundred milliseconds, so the unit is the one of
+s, ms, us, ns that puts the span of the times across the cloud (max - min) within
+:data:`PLAUSIBLE_SWEEP_S` (1 ms .. 1 s). The units are tried starting from the field type's
+usual one: ns, us, ms, s for integer fields (Livox ``offset_time``, Ouster ``t``: integer
+nanoseconds) and s, ms, us, ns for float fields (Velodyne ``time``, Hesai ``timestamp``:
+seconds). Neighbouring units are 1000 apart, so at most one unit fits except at the bounds,
+where the usual one wins. When none fits (every point has the same time, or a span longer than
+a second) the usual unit is kept (ns for integers, s for floats) and ``fields["warnings"]`` says
+so with the span; float times read in another unit than seconds are also noted there. Times stay
+on the file's own clock (not shifted to start at 0); a nanosecond epoch in float64 seconds keeps
+about 0.2 us.
 """
 
 from __future__ import annotations
@@ -14,6 +46,7 @@ import re
 import sys
 import tempfile
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -26,47 +59,174 @@ log = logging.getLogger(__name__)
 
 POINT_SUFFIXES = (".bin", ".npy", ".pcd", ".ply")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-#: Field names read as the intensity column of a .pcd or .ply cloud (case-insensitive, first wins).
-INTENSITY_FIELDS = ("intensity", "i", "reflectance")
+#: Field names read as the intensity of a cloud (case-insensitive, first wins).
+INTENSITY_FIELDS = ("intensity", "reflectivity", "signal", "i", "reflectance")
+#: Field names read as the laser (ring) index (case-insensitive, first wins).
+RING_FIELDS = ("ring", "laser_id", "channel", "line")
+#: Field names read as the per-point time (case-insensitive, first wins).
+TIME_FIELDS = ("time", "t", "timestamp", "offset_time")
+#: Span of a sweep's per-point times, in seconds, that the time-unit rule accepts as plausible.
+PLAUSIBLE_SWEEP_S = (1e-3, 1.0)
+#: How a user declares the layout of .bin files (the text put into error messages).
+DECLARE_LAYOUT = "points: {{layout: {}}} in calib.yaml"
+
+_TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
+_UNIT_WORDS = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
+#: A .bin file is only judged to be in another layout with at least this many records: fewer
+#: whole-numbered ring values can be chance (tiny synthetic or hand-made files).
+_MIN_LAYOUT_EVIDENCE = 64
 
 
-def read_points(path: Path) -> np.ndarray:
+@dataclass(frozen=True)
+class BinLayout:
+    """The record of a headerless ``.bin`` cloud: one record per point, fields back to back.
+
+    Attributes
+    ----------
+    columns : tuple of (str, str)
+        Field name and NumPy type (little endian) of each value in a record, in file order.
+        ``x, y, z`` are metres; ``ring`` and ``time`` follow the rules of :func:`read_cloud`.
+    note : str
+        Where the layout is found and what its values mean.
+    """
+
+    columns: tuple[tuple[str, str], ...]
+    note: str
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The record as a structured NumPy dtype."""
+        return np.dtype(list(self.columns))
+
+    @property
+    def record_bytes(self) -> int:
+        """Bytes per point."""
+        return self.dtype.itemsize
+
+    def describe(self) -> str:
+        """The record in words, e.g. ``float32 x, y, z, intensity; 16 bytes per point``."""
+        kinds = {np.dtype(t).name for _, t in self.columns}
+        names = ", ".join(n for n, _ in self.columns)
+        return f"{'/'.join(sorted(kinds))} {names}; {self.record_bytes} bytes per point"
+
+
+def _float32_layout(names: str, note: str) -> BinLayout:
+    return BinLayout(tuple((n, "<f4") for n in names.split()), note)
+
+
+#: The declared layouts of ``.bin`` clouds, by the name users give (``bin_layout``). Without a
+#: declaration a ``.bin`` file is read as ``kitti``, but refused when its size does not fit, or
+#: when it holds at least 64 records of a layout with a ring column whose every ring is a whole
+#: number 0..255 (see ``_fits_ring_layout``). Layouts without a ring (``xyzit``) cannot be told
+#: from KITTI by their data: such a file whose size divides by 16 reads as ``kitti`` unless
+#: declared.
+BIN_LAYOUTS: dict[str, BinLayout] = {
+    "kitti": _float32_layout(
+        "x y z intensity",
+        "KITTI, SemanticKITTI and most .bin exports; intensity as stored (KITTI: 0..1); the "
+        "default"),
+    "nuscenes": _float32_layout(
+        "x y z intensity ring",
+        "nuScenes LIDAR_TOP .pcd.bin: intensity 0..255, the ring index stored as a float"),
+    "xyzit": _float32_layout(
+        "x y z intensity time",
+        "a per-point time after the intensity, converted to seconds by the time-unit rule; "
+        "float32 keeps about 7 digits, so the time should be relative (from the sweep start), "
+        "not an epoch stamp"),
+    "xyzirt": _float32_layout(
+        "x y z intensity ring time",
+        "ROS velodyne PointXYZIRT written out flat with every field as float32"),
+    "xyz": _float32_layout("x y z", "coordinates only; intensity reads as 0"),
+}
+
+
+@dataclass(eq=False)
+class Cloud:
+    """A LiDAR sweep with the per-point fields its file offers.
+
+    Attributes
+    ----------
+    points : ndarray, shape (N, 4), float32
+        ``x, y, z`` in metres and intensity (as stored; 0 when the file has none). Points with a
+        NaN or infinite coordinate are left out; a NaN or infinite intensity reads as 0.
+    ring : ndarray, shape (N,), int16, or None
+        Laser (ring) index per point, 0..255 as the file numbers them; None without a ring field.
+    time : ndarray, shape (N,), float64, or None
+        Per-point time in seconds on the file's own clock; None without a time field.
+    fields : dict
+        ``intensity``, ``ring``, ``time``: the file field read for each (its own spelling) or
+        None; ``time_unit``: the unit the time field was read in (``s``, ``ms``, ``us``,
+        ``ns``) or None; ``format``: ``pcd``, ``ply``, ``npy`` or ``bin``; ``layout``: the
+        :data:`BIN_LAYOUTS` name used (``.bin`` and plain ``.npy`` with a declared layout) or
+        None; ``warnings``: list of str, things the caller should tell the user once per source
+        (a missing intensity field, a time unit that had to be guessed).
+    """
+
+    points: np.ndarray
+    ring: np.ndarray | None
+    time: np.ndarray | None
+    fields: dict
+
+
+def read_points(path: Path, bin_layout: str | None = None) -> np.ndarray:
     """Read a LiDAR sweep as an (N, 4) float32 array ``x, y, z, intensity``.
 
-    ``.bin`` holds float32 quadruples (KITTI); ``.npy`` holds an (N, 3) or (N, 4) array (a
-    missing intensity column reads as zeros); ``.pcd`` (PCL: ascii, binary or binary_compressed)
-    and ``.ply`` (ascii, binary little or big endian) need fields ``x``, ``y``, ``z`` and may have
-    an intensity field named ``intensity``, ``i`` or ``reflectance`` (zeros without one); other
-    fields are ignored. Points with a NaN or infinite coordinate are dropped with a warning that
-    counts them; a NaN or infinite intensity reads as zero.
+    The ``points`` of :func:`read_cloud` (see there for formats, field names and errors).
+    """
+    return read_cloud(path, bin_layout).points
+
+
+def read_cloud(path: Path, bin_layout: str | None = None) -> Cloud:
+    """Read a LiDAR sweep with its intensity, ring and time fields when the file has them.
+
+    Parameters
+    ----------
+    path : path
+        A ``.pcd``, ``.ply``, ``.npy`` or ``.bin`` file (chosen by suffix, case-insensitive).
+        ``.pcd``/``.ply`` need fields ``x``, ``y``, ``z``; other fields are matched by the names
+        in the module docstring. ``.npy`` holds a record array with named fields (any shape; an
+        organised H x W cloud is flattened row by row) or a plain N x 3 / N x 4 array ``x, y,
+        z[, intensity]`` (wider plain arrays need ``bin_layout``).
+    bin_layout : str, optional
+        A :data:`BIN_LAYOUTS` name: the record of ``.bin`` files, and the columns of a plain
+        ``.npy`` array with as many columns. Without it a ``.bin`` file is read as ``kitti``
+        when its size and data fit that layout. Ignored (with a note in ``fields["warnings"]``)
+        for files that name their fields.
+
+    Returns
+    -------
+    Cloud
+        The points, ring (int16) and time (float64 seconds) of the points with finite
+        coordinates, and which file fields gave them.
+
+    Raises
+    ------
+    InputError
+        Naming the file and what is wrong: missing, unreadable, malformed or truncated data, no
+        ``x``/``y``/``z``, empty, every point NaN, ring values that are not whole numbers
+        0..255, NaN or infinite times, a ``.bin`` size that fits no layout or data that fits a
+        layout other than the one assumed, an unknown ``bin_layout``.
+
+    Notes
+    -----
+    Points with a NaN or infinite coordinate are dropped (with their ring and time) and the
+    count is logged as a warning; the other notes are returned in ``fields["warnings"]``
+    rather than logged, so that the caller can say them once per source.
     """
     path = Path(path)
+    layout = _layout_name(path, bin_layout)
     _require_file(path, "point cloud file")
     suffix = path.suffix.lower()
+    notes: list[str] = []
     try:
         if suffix == ".bin":
-            size = path.stat().st_size
-            if size % 16:
-                raise InputError(f"{path}: size {size} bytes is not a multiple of 16 "
-                                 "(float32 x, y, z, intensity); the file is truncated or not a "
-                                 "KITTI .bin sweep")
-            pts = np.fromfile(path, dtype=np.float32).reshape(-1, 4)
+            cols, used = _read_bin(path, path.read_bytes(), layout)
         elif suffix == ".npy":
-            with open(path, "rb") as fh:
-                if fh.read(6) != b"\x93NUMPY":
-                    raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
-            arr = np.load(path, allow_pickle=False)
-            if arr.ndim != 2 or arr.shape[1] not in (3, 4):
-                raise InputError(f"{path}: expected an N x 3 or N x 4 array, got shape {arr.shape}")
-            if arr.dtype.kind not in "iuf":
-                raise InputError(f"{path}: expected real numbers, got dtype {arr.dtype}")
-            pts = np.zeros((arr.shape[0], 4), dtype=np.float32)
-            with np.errstate(over="ignore", invalid="ignore"):   # out of float32 range -> inf
-                pts[:, : arr.shape[1]] = arr
+            cols, used = _read_npy(path, layout)
         elif suffix == ".pcd":
-            pts = _read_pcd(path, path.read_bytes())
+            cols, used = _read_pcd(path, path.read_bytes()), None
         elif suffix == ".ply":
-            pts = _read_ply(path, path.read_bytes())
+            cols, used = _read_ply(path, path.read_bytes()), None
         else:
             raise InputError(f"{path}: unsupported point cloud format {suffix!r} "
                              f"(supported: {', '.join(POINT_SUFFIXES)})")
@@ -76,6 +236,53 @@ def read_points(path: Path) -> np.ndarray:
         raise InputError(f"{path}: cannot read point cloud ({exc.strerror or exc})") from None
     except ValueError as exc:
         raise InputError(f"{path}: cannot read point cloud ({_first_line(exc)})") from None
+    if layout is not None and used is None:
+        notes.append(f"layout {layout!r} ignored: it applies to .bin files and plain .npy "
+                     f"arrays, and this {suffix} file names its fields")
+    return _assemble(path, cols, suffix[1:], used, notes)
+
+
+def _layout_name(path: Path, name) -> str | None:
+    """``name`` checked against :data:`BIN_LAYOUTS` (case-insensitive), or None."""
+    if name is None:
+        return None
+    key = name.strip().lower() if isinstance(name, str) else None
+    if key not in BIN_LAYOUTS:
+        raise InputError(f"{path}: unknown point layout {name!r} (known: "
+                         f"{', '.join(BIN_LAYOUTS)})")
+    return key
+
+
+def _assemble(path: Path, cols: dict[str, np.ndarray], fmt: str, layout: str | None,
+              notes: list[str]) -> Cloud:
+    """The cloud of named columns: pick the fields, drop non-finite points, check ring and time.
+
+    ``cols`` maps the file's field names to equally long 1-D arrays in the file's types.
+    """
+    by_name: dict[str, tuple[str, np.ndarray]] = {}
+    for name, col in cols.items():
+        by_name.setdefault(name.lower(), (name, col))
+    missing = [c for c in "xyz" if c not in by_name]
+    if missing:
+        raise InputError(f"{path}: no {', '.join(repr(c) for c in missing)} field "
+                         f"(fields: {', '.join(cols) or 'none'}); x, y and z are required")
+
+    def pick(aliases: tuple[str, ...]) -> tuple[str | None, np.ndarray | None]:
+        return next((by_name[a] for a in aliases if a in by_name), (None, None))
+
+    i_name, inten = pick(INTENSITY_FIELDS)
+    r_name, ring = pick(RING_FIELDS)
+    t_name, time = pick(TIME_FIELDS)
+    n = len(by_name["x"][1])
+    pts = np.zeros((n, 4), dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):   # doubles out of float32 range -> inf
+        for j, c in enumerate("xyz"):
+            pts[:, j] = by_name[c][1]
+        if inten is not None:
+            pts[:, 3] = inten
+    if inten is None:
+        notes.insert(0, f"no intensity field (looked for {', '.join(INTENSITY_FIELDS)}): "
+                        "intensity reads as 0, so intensity edges are off")
     finite = np.isfinite(pts[:, :3]).all(axis=1)
     if len(pts) and not finite.any():
         raise InputError(f"{path}: all {len(pts)} points have NaN or infinite coordinates "
@@ -84,31 +291,201 @@ def read_points(path: Path) -> np.ndarray:
         log.warning("%s: dropped %d points with NaN or infinite coordinates",
                     path, int((~finite).sum()))
         pts = pts[finite]
+        ring = None if ring is None else ring[finite]
+        time = None if time is None else time[finite]
     pts[:, 3] = np.nan_to_num(pts[:, 3], nan=0.0, posinf=0.0, neginf=0.0)
     if len(pts) == 0:
         raise InputError(f"{path}: the point cloud is empty")
-    return np.ascontiguousarray(pts)
+    unit = None
+    if ring is not None:
+        ring = _ring_numbers(path, r_name, ring)
+    if time is not None:
+        time, unit = _seconds(path, t_name, time, notes)
+    fields = {"intensity": i_name, "ring": r_name, "time": t_name, "time_unit": unit,
+              "format": fmt, "layout": layout, "warnings": notes}
+    return Cloud(np.ascontiguousarray(pts), ring, time, fields)
 
 
-def _xyzi(path: Path, fields: dict[str, np.ndarray]) -> np.ndarray:
-    """Stack named columns into (N, 4) float32 ``x, y, z, intensity`` (zeros without intensity)."""
-    lower: dict[str, np.ndarray] = {}
-    for name, col in fields.items():
-        lower.setdefault(name.lower(), col)
-    missing = [c for c in "xyz" if c not in lower]
-    if missing:
-        raise InputError(f"{path}: no {', '.join(repr(c) for c in missing)} field "
-                         f"(fields: {', '.join(fields) or 'none'}); x, y and z are required")
-    n = len(lower["x"])
-    pts = np.zeros((n, 4), dtype=np.float32)
-    with np.errstate(over="ignore", invalid="ignore"):   # doubles out of float32 range -> inf
-        for j, c in enumerate("xyz"):
-            pts[:, j] = lower[c]
-        for name in INTENSITY_FIELDS:
-            if name in lower:
-                pts[:, 3] = lower[name]
-                break
-    return pts
+def _num(v) -> str:
+    """A number for a message: whole numbers without a decimal point."""
+    v = v.item() if hasattr(v, "item") else v
+    if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
+        return str(int(v))
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def _ring_numbers(path: Path, name: str, col: np.ndarray) -> np.ndarray:
+    """The ring field as int16 after checking that it holds whole numbers 0..255."""
+    if col.dtype.kind not in "iuf":
+        raise InputError(f"{path}: field {name!r} has type {col.dtype}; ring numbers must be "
+                         "whole numbers 0..255")
+    if col.dtype.kind == "f":
+        bad = ~np.isfinite(col)
+        if bad.any():
+            raise InputError(f"{path}: field {name!r} holds NaN or infinite values at "
+                             f"{int(bad.sum())} of {len(col)} points; ring numbers must be whole "
+                             "numbers 0..255")
+    lo, hi = col.min(), col.max()
+    if lo < 0 or hi > 255:
+        raise InputError(f"{path}: field {name!r} holds values outside 0..255 "
+                         f"(min {_num(lo)}, max {_num(hi)})")
+    if col.dtype.kind == "f":
+        frac = col != np.round(col)
+        if frac.any():
+            raise InputError(f"{path}: field {name!r} holds values that are not whole numbers "
+                             f"(e.g. {_num(col[frac][0])}); ring numbers must be whole numbers "
+                             "0..255")
+    return col.astype(np.int16)
+
+
+def _seconds(path: Path, name: str, col: np.ndarray,
+             notes: list[str]) -> tuple[np.ndarray, str]:
+    """The time field in float64 seconds and the unit chosen (module docstring: the rule)."""
+    if col.dtype.kind not in "iuf":
+        raise InputError(f"{path}: field {name!r} has type {col.dtype}; expected numbers")
+    integer = col.dtype.kind in "iu"
+    if integer:
+        span = int(col.max()) - int(col.min())            # exact, even for 64-bit epochs
+    else:
+        bad = ~np.isfinite(col)
+        if bad.any():
+            raise InputError(f"{path}: field {name!r} holds NaN or infinite times at "
+                             f"{int(bad.sum())} of {len(col)} points")
+        span = float(col.max()) - float(col.min())
+    order = ("ns", "us", "ms", "s") if integer else ("s", "ms", "us", "ns")
+    lo, hi = PLAUSIBLE_SWEEP_S
+    unit = next((u for u in order if lo <= span / _TIME_UNITS[u] <= hi), None)
+    kind = "integers" if integer else "floats"
+    if unit is None:
+        unit = order[0]
+        if span == 0:
+            notes.append(f"time field {name!r}: every point has the same time, so its unit "
+                         f"cannot be told; read as {_UNIT_WORDS[unit]}")
+        else:
+            notes.append(f"time field {name!r}: its {kind} span {_num(span)} across the cloud, "
+                         f"which is no plausible sweep duration ({lo * 1e3:g} ms .. {hi:g} s) "
+                         f"in s, ms, us or ns; read as {_UNIT_WORDS[unit]} (a span of "
+                         f"{span / _TIME_UNITS[unit]:.6g} s)")
+    elif not integer and unit != "s":
+        notes.append(f"time field {name!r}: its floats span {_num(span)} across the cloud, "
+                     f"read as {_UNIT_WORDS[unit]} ({span / _TIME_UNITS[unit]:.3g} s)")
+    t = col.astype(np.float64)
+    if unit != "s":
+        t /= _TIME_UNITS[unit]
+    return t, unit
+
+
+# --- .bin and .npy --------------------------------------------------------------------------------
+
+
+def _read_bin(path: Path, raw: bytes, declared: str | None) -> tuple[dict[str, np.ndarray], str]:
+    """The columns of a ``.bin`` file in the declared layout, or in ``kitti`` when it fits."""
+    size = len(raw)
+    if declared is not None:
+        lay = BIN_LAYOUTS[declared]
+        if size % lay.record_bytes:
+            raise InputError(f"{path}: size {size} bytes is not a multiple of "
+                             f"{lay.record_bytes} (layout {declared!r}: {lay.describe()}); the "
+                             "file is truncated or not in that layout")
+        name = declared
+    else:
+        name = "kitti"
+        kitti = BIN_LAYOUTS[name]
+        others = [k for k, lay in BIN_LAYOUTS.items()
+                  if k != name and size and size % lay.record_bytes == 0]
+        fits = [k for k in others if _fits_ring_layout(raw, BIN_LAYOUTS[k])]
+        if size % kitti.record_bytes:
+            base = (f"{path}: size {size} bytes is not a multiple of {kitti.record_bytes} "
+                    "(float32 x, y, z, intensity); the file is truncated or not a KITTI .bin "
+                    "sweep")
+            if fits:
+                raise InputError(f"{base}; its data fits layout {fits[0]!r} "
+                                 f"({BIN_LAYOUTS[fits[0]].describe()}): declare it "
+                                 f"({DECLARE_LAYOUT.format(fits[0])})")
+            if others:
+                listed = ", ".join(f"{k} ({BIN_LAYOUTS[k].describe()})" for k in others)
+                raise InputError(f"{base}; its size fits layout{'s' * (len(others) > 1)} "
+                                 f"{listed}: declare the one it is "
+                                 f"({DECLARE_LAYOUT.format('NAME')})")
+            tried = ", ".join(f"{k} {lay.record_bytes}" for k, lay in BIN_LAYOUTS.items())
+            raise InputError(f"{base}, and fits no other layout (tried {tried} bytes per "
+                             "point)")
+        if fits:
+            lay = BIN_LAYOUTS[fits[0]]
+            raise InputError(f"{path}: the data does not look like KITTI's float32 x, y, z, "
+                             f"intensity: it fits layout {fits[0]!r} ({lay.describe()}), every "
+                             "record's ring being a whole number 0..255; declare it "
+                             f"({DECLARE_LAYOUT.format(fits[0])}), or declare 'kitti' if the "
+                             "file is KITTI's")
+    arr = np.frombuffer(raw, dtype=BIN_LAYOUTS[name].dtype)
+    return {c: arr[c] for c in arr.dtype.names}, name
+
+
+def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
+    """Whether ``raw`` reads as ``lay``, a layout with a ring column, better than as KITTI.
+
+    True when every record's ring is a whole number 0..255 while the coordinates are mostly not
+    whole numbers. Read with the wrong record length the ring column cycles through the other
+    fields, coordinates among them, so a KITTI file never passes; coordinates that are whole
+    numbers (synthetic or zeroed clouds) prove nothing either way, hence the second condition.
+    """
+    if "ring" not in lay.dtype.names or len(raw) % lay.record_bytes:
+        return False
+    arr = np.frombuffer(raw, dtype=lay.dtype)
+    if len(arr) < _MIN_LAYOUT_EVIDENCE:
+        return False
+    ring = arr["ring"]
+    if not (np.isfinite(ring).all() and (ring >= 0).all() and (ring <= 255).all()
+            and (ring == np.round(ring)).all()):
+        return False
+    xyz = np.stack([arr[c] for c in "xyz"])
+    finite = np.isfinite(xyz)
+    whole = finite & (xyz == np.round(xyz))
+    return bool(whole.sum() < 0.5 * finite.sum())
+
+
+def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], str | None]:
+    """The columns of a ``.npy`` file: a record array's fields or a plain array's columns."""
+    with open(path, "rb") as fh:
+        if fh.read(6) != b"\x93NUMPY":
+            raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
+    arr = np.load(path, allow_pickle=False)
+    if arr.dtype.names:
+        if arr.ndim == 0:
+            raise InputError(f"{path}: the record array holds a single record, not a cloud")
+        arr = arr.reshape(-1)
+        wanted = ("x", "y", "z") + INTENSITY_FIELDS + RING_FIELDS + TIME_FIELDS
+        cols = {}
+        for name in arr.dtype.names:
+            ft = arr.dtype.fields[name][0]
+            if ft.shape or ft.kind not in "iuf":
+                if name.lower() in wanted:
+                    raise InputError(f"{path}: field {name!r} has type {ft}; expected one real "
+                                     "number per point")
+                continue
+            cols[name] = arr[name]
+        return cols, None
+    cols_n = arr.shape[1] if arr.ndim == 2 else None
+    if declared is not None:
+        lay = BIN_LAYOUTS[declared]
+        if cols_n != len(lay.columns):
+            raise InputError(f"{path}: layout {declared!r} has {len(lay.columns)} columns "
+                             f"({', '.join(n for n, _ in lay.columns)}), the array has shape "
+                             f"{arr.shape}")
+        names = [n for n, _ in lay.columns]
+    elif cols_n in (3, 4):
+        names = ["x", "y", "z", "intensity"][:cols_n]
+    else:
+        hint = ""
+        if cols_n is not None and cols_n > 4:
+            same = [k for k, lay in BIN_LAYOUTS.items() if len(lay.columns) == cols_n]
+            hint = ("; a wider array needs a declared layout"
+                    + (f" ({', '.join(same)} have {cols_n} columns)" if same else "")
+                    + " or named fields (a record array)")
+        raise InputError(f"{path}: expected an N x 3 or N x 4 array, got shape {arr.shape}{hint}")
+    if arr.dtype.kind not in "iuf":
+        raise InputError(f"{path}: expected real numbers, got dtype {arr.dtype}")
+    return {n: arr[:, j] for j, n in enumerate(names)}, declared
 
 
 def _loadtxt(body: bytes, **kw) -> np.ndarray:
@@ -122,6 +499,24 @@ def _loadtxt(body: bytes, **kw) -> np.ndarray:
         return np.loadtxt(io.BytesIO(body), dtype=np.float64, ndmin=2, comments=None, **kw)
 
 
+def _ascii_column(col: np.ndarray, dtype: str) -> np.ndarray:
+    """A float64 column of an ascii table back in its declared type.
+
+    Integer fields become integers again, so that the time-unit rule sees their type (64-bit
+    values beyond 2**53 keep float64's rounding, below what float64 seconds resolve anyway). A
+    column that does not hold whole numbers in the type's range stays float64, for the ring
+    and time checks to name.
+    """
+    dtype = np.dtype(dtype)
+    if dtype.kind not in "iu" or len(col) == 0:
+        return col
+    info = np.iinfo(dtype)
+    if not (np.isfinite(col).all() and (col == np.round(col)).all()
+            and info.min <= col.min() and col.max() <= info.max):
+        return col
+    return col.astype(dtype)
+
+
 def _first_line(exc: Exception) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
@@ -132,8 +527,8 @@ def _first_line(exc: Exception) -> str:
 _PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4",
               ("U", 8): "u8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8"}
 _PCD_DATA = ("ascii", "binary", "binary_compressed")
-
-
+#: Fields that must hold one value per point (COUNT 1) when present.
+_SCALAR_FIELDS = ("x", "y", "z") + INTENSITY_FIELDS + RING_FIELDS + TIME_FIELDS
 def _pcd_header(path: Path, raw: bytes) -> tuple[dict[str, list[str]], int]:
     """Header entries (upper-case key -> values) and the offset of the data."""
     entries: dict[str, list[str]] = {}
@@ -172,8 +567,12 @@ def _pcd_int(path: Path, entries: dict[str, list[str]], key: str) -> int:
     return value
 
 
-def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
-    """A PCL point cloud file as (N, 4) float32; binary_compressed data is decoded by pypcd4."""
+def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
+    """The fields of a PCL point cloud file, in their declared types.
+
+    binary_compressed data is decoded by pypcd4. Fields with COUNT > 1 and padding (``_``) are
+    left out.
+    """
     entries, offset = _pcd_header(path, raw)
     for key in ("FIELDS", "SIZE", "TYPE"):
         if not entries.get(key):
@@ -196,7 +595,7 @@ def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
         if c < 1:
             raise InputError(f"{path}: PCD field {name!r} has COUNT {c}")
     for name, c in zip(fields, counts):
-        if name.lower() in ("x", "y", "z") + INTENSITY_FIELDS and c != 1:
+        if name.lower() in _SCALAR_FIELDS and c != 1:
             raise InputError(f"{path}: PCD field {name!r} has COUNT {c}, expected 1")
     width = _pcd_int(path, entries, "WIDTH") if "WIDTH" in entries else None
     height = _pcd_int(path, entries, "HEIGHT") if "HEIGHT" in entries else 1
@@ -222,7 +621,7 @@ def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
     dtype = np.dtype({"names": names, "formats": ["<" + f for f in formats]})
     body = raw[offset:]
     if n == 0:
-        return _xyzi(path, {name: np.zeros(0) for name in names if not name.startswith("_")})
+        return {name: np.zeros(0, f) for name, f in zip(names, formats) if name[0] != "_"}
     if data == "ascii":
         # Whitespace-separated values, one point per line (tolerant of tabs and trailing blanks).
         try:
@@ -233,7 +632,8 @@ def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
             raise InputError(f"{path}: PCD ascii data has {table.shape[0]} rows of "
                              f"{table.shape[1] if table.size else 0} values; the header says "
                              f"POINTS {n} of {len(names)} values (truncated or wrong header)")
-        cols = {name: table[:, j] for j, name in enumerate(names)}
+        cols = {name: _ascii_column(table[:, j], f)
+                for j, (name, f) in enumerate(zip(names, formats)) if name[0] != "_"}
     elif data == "binary":
         need = n * dtype.itemsize
         if len(body) < need:
@@ -243,7 +643,7 @@ def _read_pcd(path: Path, raw: bytes) -> np.ndarray:
         cols = {name: arr[name] for name in names}
     else:
         cols = dict(zip(names, _pcd_compressed(path, body, types, sizes, counts, n)))
-    return _xyzi(path, {k: v for k, v in cols.items() if not k.startswith("_")})
+    return {k: v for k, v in cols.items() if not k.startswith("_")}
 
 
 def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
@@ -288,8 +688,8 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
 _PLY_FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
 
 
-def _read_ply(path: Path, raw: bytes) -> np.ndarray:
-    """The ``vertex`` element of a PLY file as (N, 4) float32 ``x, y, z, intensity``."""
+def _read_ply(path: Path, raw: bytes) -> dict[str, np.ndarray]:
+    """The properties of the ``vertex`` element of a PLY file, in their declared types."""
     if not re.match(rb"ply\r?\n", raw[:5]):
         raise InputError(f"{path}: not a PLY file (the first line is not 'ply')")
     end = re.search(rb"(^|\n)end_header[ \t]*\r?\n", raw[:1 << 20])
@@ -349,7 +749,7 @@ def _read_ply(path: Path, raw: bytes) -> np.ndarray:
         # One line per element instance: skip the lines of the elements before the vertices.
         skip = sum(e[1] for e in elements[:iv])
         if n == 0:
-            return np.zeros((0, 4), np.float32)
+            return {p: np.zeros(0, t) for p, t in props}
         try:
             table = _loadtxt(body, skiprows=skip, max_rows=n)
         except ValueError as exc:
@@ -359,7 +759,7 @@ def _read_ply(path: Path, raw: bytes) -> np.ndarray:
             raise InputError(f"{path}: PLY ascii data has {table.shape[0]} vertex lines of "
                              f"{table.shape[1] if table.size else 0} values; the header says "
                              f"{n} of {len(pnames)} (truncated or wrong header)")
-        cols = {p: table[:, j] for j, p in enumerate(pnames)}
+        cols = {p: _ascii_column(table[:, j], t) for j, (p, t) in enumerate(props)}
     else:
         endian = _PLY_FORMATS[fmt]
         start = 0
@@ -375,7 +775,7 @@ def _read_ply(path: Path, raw: bytes) -> np.ndarray:
                              f"header, {need} needed for {n} vertices of {dtype.itemsize} bytes")
         arr = np.frombuffer(body, dtype=dtype, count=n, offset=start)
         cols = {p: arr[p] for p in pnames}
-    return _xyzi(path, cols)
+    return cols
 
 
 def _require_file(path: Path, what: str) -> None:
