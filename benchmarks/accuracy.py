@@ -1,20 +1,63 @@
-"""Accuracy from random decalibrations of the sample KITTI drive, through the public CLI.
+"""Accuracy from random decalibrations of any dataset with a reference extrinsic, through the CLI.
 
 Each trial draws a seeded correction, uniform per axis in +-ROT deg and +-TRANS m, and starts
-from the extrinsic that this correction brings back to KITTI's reference (so the correction to
-find lies in the box, inside the search bounds for the paper's +-20 deg / +-1.5 m). It writes
-a *blind copy* of the dataset whose calibration file holds the perturbed extrinsic (symbolic
-links to the frames, rewritten calib_velo_to_cam.txt), so the tool cannot see the reference,
-and runs
+from the extrinsic that this correction brings back to the dataset's reference (so the
+correction to find lies in the box). It writes a *blind copy* of the dataset whose calibration
+holds the perturbed extrinsic (symbolic links to the frames, the calibration file rewritten and
+read back to check it), so the tool cannot see the reference, and runs
 
-    paretocal calibrate COPY --init INIT.yaml --out RUN --quiet [--frames ...] [--config ...]
+    paretocal calibrate COPY --init INIT.yaml --out RUN --quiet --no-figures
+        [--frames ...] [--config ...] [--init-error DEG,M] [--extra options] [-- options]
 
-and compares ``RUN/result.json`` with the reference.
+then compares ``RUN/result.json`` with the reference and records the tool's own verdict
+(``reliability.verdict`` and its reasons). The summary gives mean / median / p95 / max errors,
+per-axis errors, success rates, wall times, and the verdict's honesty: how many results more than
+1 deg or 10 cm off were flagged ``unreliable``, and how many correct ones were.
 
-    .venv/bin/python benchmarks/accuracy.py --trials 20 --rot 10 --trans 0.25
-    .venv/bin/python benchmarks/accuracy.py --trials 20 --rot 20 --trans 1.5 --json out.json
+Datasets (``--source`` takes any folder ``paretocal`` reads):
 
-``--api`` calls the library instead of the CLI (same calibration, no copy, no process start).
+* ``--dataset raw`` (default): the 20-frame KITTI raw drive of the sample data;
+  ``--dataset object``: the single KITTI object frame;
+* ``--source PATH``: a KITTI raw drive or date folder, a KITTI object ``training`` folder, or a
+  generic folder (``calib.yaml`` with ``T_cam_lidar``, ``images/``, ``points/``). The blind copy
+  of a generic folder links every entry of the folder (symbolic links resolved, including the
+  one-line files that stand for a link where links were not kept) and rewrites ``calib.yaml``
+  with ``T_cam_lidar`` set to the start, every other key unchanged;
+* ``--variant NAME[,NAME...]`` (repeatable): rig variants of a KITTI source (``paretocal.testing``)
+  written as generic folders: ``32beam`` / ``16beam`` (every 2nd / 4th ring), ``firing``
+  (column-major order), ``shuffled`` (random order), ``vehicle`` (the cloud in a vehicle frame,
+  the sensor 1.5 m from its origin; the reference becomes ``T_cam_lidar @ inv(sensor_pose)`` and
+  ``calib.yaml`` gets ``lidar_pose``), ``generic`` (unchanged, as a generic folder); ``a+b``
+  applies ``a`` then ``b``. Each variant is a dataset of its own, with the same trial seeds.
+
+The figures the project reports (``DATA`` is the sample data folder, ``../shared/data``):
+
+    # KITTI raw drive, 20 frames, +-10 deg / +-0.25 m, 20 trials
+    .venv/bin/python benchmarks/accuracy.py --trials 20 --rot 10 --trans 0.25 \\
+        --json runs/acc_kitti_10.json
+    # aiMotive front pinhole and left fisheye (Mei), 20 frames each, 10 trials per box
+    .venv/bin/python benchmarks/accuracy.py --source DATA/aimotive/front_pinhole \\
+        --trials 10 --rot 5 --trans 0.2 --json runs/acc_aim_front_5.json
+    .venv/bin/python benchmarks/accuracy.py --source DATA/aimotive/front_pinhole \\
+        --trials 10 --rot 10 --trans 0.25 --json runs/acc_aim_front_10.json
+    .venv/bin/python benchmarks/accuracy.py --source DATA/aimotive/left_fisheye \\
+        --trials 10 --rot 5 --trans 0.2 --json runs/acc_aim_fisheye_5.json
+    .venv/bin/python benchmarks/accuracy.py --source DATA/aimotive/left_fisheye \\
+        --trials 10 --rot 10 --trans 0.25 --json runs/acc_aim_fisheye_10.json
+    # KITTI rig variants, 20 frames, +-5 deg / +-0.2 m, 5 trials each
+    .venv/bin/python benchmarks/accuracy.py --variant 32beam,16beam,firing,shuffled,vehicle \\
+        --trials 5 --rot 5 --trans 0.2 --json runs/acc_variants_5.json
+    # KITTI raw drive, 2 frames (0 and 10), +-3 deg / +-0.1 m, 10 trials
+    .venv/bin/python benchmarks/accuracy.py --frames 0,10 --trials 10 --rot 3 --trans 0.1 \\
+        --json runs/acc_kitti_2frames_3.json
+
+Other ranges: ``--rot 20 --trans 1.5`` (the paper's box), ``--frames 0:10`` for a subset.
+``--init-error DEG,M`` passes the tool's ``--init-error`` (``--init-error box`` passes the trial
+box ``ROT,TRANS``); ``--extra "OPTIONS"`` (repeatable) and everything after ``--`` are passed
+to ``paretocal calibrate`` as they are. ``--api`` calls the library instead of the CLI (same
+calibration, no process start; only ``--init-error`` of the passthrough options applies).
+``--json FILE`` writes every trial and the summaries (rewritten after each trial); ``--keep DIR``
+keeps the blind copies, variant folders and runs.
 """
 
 from __future__ import annotations
@@ -22,33 +65,200 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
+import shlex
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from paretocal.geometry import correction_matrix, invert, pose_error
-from paretocal.io import detect_source, write_extrinsic
+from paretocal.geometry import check_rigid, correction_matrix, invert, pose_error
+from paretocal.io import detect_source, load_frames, write_extrinsic
 from paretocal.io.exports import kitti_velo_to_cam_text
+from paretocal.io.readers import read_mapping
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
 DATE = DATA / "kitti_raw" / "2011_09_26"
+OBJECT = DATA / "kitti_object" / "training"
 AXES = ("yaw_deg", "pitch_deg", "roll_deg", "x_cm", "y_cm", "z_cm")
+#: A result is "off" beyond either limit (the verdict's honesty figures).
+OFF_DEG, OFF_CM = 1.0, 10.0
+
+
+# --- rig variants --------------------------------------------------------------------------
+
+def _variant_steps():
+    from paretocal import testing as T
+
+    return {
+        "generic": lambda v, k: v,
+        "32beam": lambda v, k: T.decimate(v, 2),
+        "16beam": lambda v, k: T.decimate(v, 4),
+        "firing": lambda v, k: T.firing_order(v),
+        "shuffled": lambda v, k: T.shuffled(v, k),
+        "vehicle": lambda v, k: T.to_vehicle_frame(v),
+    }
+
+
+VARIANTS = ("generic", "32beam", "16beam", "firing", "shuffled", "vehicle")
+
+
+def parse_variants(values: list[str] | None) -> list[str]:
+    """``--variant`` values (repeated and/or comma lists) -> names; ``a+b`` chains steps."""
+    names = []
+    for value in values or []:
+        for name in (t.strip() for t in value.split(",")):
+            if not name:
+                continue
+            bad = [s for s in name.split("+") if s not in VARIANTS]
+            if bad:
+                raise SystemExit(f"accuracy.py: unknown variant {bad[0]!r} (one of "
+                                 f"{', '.join(VARIANTS)}, or steps joined by '+')")
+            names.append(name)
+    return list(dict.fromkeys(names))
+
+
+def make_variant(points: np.ndarray, name: str, k: int = 0):
+    """The sweep ``points`` (KITTI scan order) as variant ``name``: a
+    :class:`paretocal.testing.Variant` (points in the variant's order, sensor pose)."""
+    from paretocal.testing import kitti_truth
+
+    steps = _variant_steps()
+    v = kitti_truth(points)
+    for step in name.split("+"):
+        v = steps[step](v, k)
+    return v
+
+
+def _rows(T) -> list[list[float]]:
+    return [[float(x) for x in row] for row in np.asarray(T, dtype=np.float64)]
+
+
+def build_variant(source: Path, name: str, dst: Path, frames: str | None = None,
+                  camera: int = 2) -> tuple[Path, np.ndarray, np.ndarray]:
+    """A generic folder at ``dst`` holding the KITTI ``source``'s frames as variant ``name``.
+
+    Images are symbolic links (KITTI's are rectified: the camera is the pinhole ``K`` of the
+    rectified camera), points float32 ``.bin`` (x, y, z, intensity) in the variant's order;
+    ``calib.yaml`` holds the camera, the reference ``T_cam_lidar`` (for a cloud moved to a
+    vehicle frame ``T_ref @ inv(sensor_pose)``) and, when the sensor is not at the cloud's
+    origin, ``lidar_pose`` (the LiDAR's pose in the cloud's frame, 4x4).
+
+    Returns the folder, its reference extrinsic and the sensor pose (identity unless moved).
+    """
+    src = detect_source(Path(source), camera)
+    if src.layout not in ("kitti_raw", "kitti_object"):
+        raise SystemExit(f"accuracy.py: --variant needs a KITTI source (scan-ordered HDL-64E "
+                         f"sweeps), not the {src.layout} layout of {source}")
+    loaded = load_frames(source, frames, camera)
+    T_src = loaded[0].T_ref
+    if any(not np.allclose(f.T_ref, T_src, atol=1e-9) for f in loaded):
+        raise SystemExit(f"accuracy.py: {source}: the frames' extrinsics differ; a variant "
+                         "folder holds one calibration")
+    cam = loaded[0].camera
+    (dst / "images").mkdir(parents=True)
+    (dst / "points").mkdir()
+    pose = None
+    for k, f in enumerate(loaded):
+        v = make_variant(f.points, name, k)
+        if pose is None:
+            pose = v.sensor_pose
+        v.points.astype(np.float32).tofile(dst / "points" / f"{f.name}.bin")
+        image = Path(f.image_path).resolve()
+        (dst / "images" / f"{f.name}{image.suffix.lower()}").symlink_to(image)
+    T_ref = T_src @ invert(pose)
+    calib = {"camera": {"model": "pinhole", "K": _rows(cam.K), "width": int(cam.width),
+                        "height": int(cam.height)},
+             "T_cam_lidar": _rows(T_ref)}
+    if not np.allclose(pose, np.eye(4)):
+        calib["lidar_pose"] = _rows(pose)
+    header = (f"# KITTI frames of {Path(source).resolve()} as rig variant '{name}'\n"
+              "# (paretocal.testing); T_cam_lidar is KITTI's reference in the cloud's frame.\n")
+    (dst / "calib.yaml").write_text(header + yaml.safe_dump(calib, sort_keys=False,
+                                                            default_flow_style=None))
+    return dst, T_ref, pose
+
+
+# --- blind copies ---------------------------------------------------------------------------
+
+def resolve_entry(path: Path) -> Path:
+    """The real target of a folder entry: symbolic links resolved, and a small one-line file
+    without a suffix that names an existing path relative to its folder (what git writes for a
+    link where links are not kept, like aiMotive's ``points -> ../points``) followed."""
+    path = Path(path)
+    if path.is_symlink():
+        return path.resolve()
+    if path.is_file() and not path.suffix and path.stat().st_size < 1024:
+        try:
+            text = path.read_text(encoding="utf-8").strip()
+        except (UnicodeDecodeError, OSError):
+            return path.resolve()
+        if text and "\n" not in text and "\0" not in text:
+            target = path.parent / text
+            if target.exists():
+                return resolve_entry(target) if target.is_symlink() else target.resolve()
+    return path.resolve()
+
+
+def folder_reference(root: Path) -> np.ndarray:
+    """``T_cam_lidar`` of a generic folder's ``calib.yaml`` (the reference)."""
+    cpath = Path(root) / "calib.yaml"
+    data = read_mapping(cpath)
+    if data.get("T_cam_lidar") is None:
+        raise SystemExit(f"accuracy.py: {cpath} has no T_cam_lidar: no reference to measure "
+                         "against")
+    return check_rigid(data["T_cam_lidar"], str(cpath))
+
+
+def blind_copy_folder(root: Path, T_cam_lidar: np.ndarray, dst: Path) -> Path:
+    """A generic folder whose ``calib.yaml`` holds ``T_cam_lidar``, every other key unchanged.
+
+    Every other entry of ``root`` (``images``, ``points``, masks, camera_info files, ...) is a
+    symbolic link to its resolved target, so relative references in ``calib.yaml`` still hold.
+    The copy is read back (its layout, frame count and extrinsic) before it is used.
+    """
+    root = Path(root)
+    data = read_mapping(root / "calib.yaml")
+    out = Path(dst) / root.resolve().name
+    out.mkdir(parents=True)
+    for entry in sorted(root.iterdir()):
+        if entry.name != "calib.yaml":
+            (out / entry.name).symlink_to(resolve_entry(entry),
+                                          target_is_directory=resolve_entry(entry).is_dir())
+    data = dict(data)
+    data["T_cam_lidar"] = _rows(T_cam_lidar)
+    header = (f"# Blind copy of {root.resolve()} for an accuracy trial: T_cam_lidar is the\n"
+              "# perturbed start, not the dataset's reference; every other key is the original's.\n")
+    (out / "calib.yaml").write_text(header + yaml.safe_dump(data, sort_keys=False,
+                                                            default_flow_style=None))
+    src = detect_source(out)
+    check = src.frames[0].T_ref
+    assert src.layout == "folder", "blind copy is not read as a generic folder"
+    assert check is not None and np.allclose(check, T_cam_lidar, atol=1e-9), \
+        "blind copy does not hold the extrinsic"
+    again = read_mapping(out / "calib.yaml")
+    assert {k: v for k, v in again.items() if k != "T_cam_lidar"} == \
+        {k: v for k, v in read_mapping(root / "calib.yaml").items() if k != "T_cam_lidar"}, \
+        "blind copy changed a calib.yaml key other than T_cam_lidar"
+    return out
 
 
 def blind_copy(date: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) -> Path:
     """A KITTI raw date folder whose ``calib_velo_to_cam.txt`` holds ``T_cam_lidar``.
 
-    The frames are symbolic links; ``calib_cam_to_cam.txt`` is copied. Since the tool's extrinsic
-    for camera N is ``[I | b] R_rect_00 Tr``, the file gets ``Tr = ([I | b] R_rect_00)^-1 T``
-    (written by the same exporter as every run's ``calib_velo_to_cam.txt``).
-    Returns the drive folder of the copy.
+    ``date`` is a date folder holding one drive, or a drive folder. The drive is a symbolic
+    link; ``calib_cam_to_cam.txt`` is copied. Since the tool's extrinsic for camera N is
+    ``[I | b] R_rect_00 Tr``, the file gets ``Tr = ([I | b] R_rect_00)^-1 T`` (written by the
+    same exporter as every run's ``calib_velo_to_cam.txt``). Returns the drive folder of the copy.
     """
     src = detect_source(date, camera)
+    date = src.root.parent
     out = dst / date.name
     out.mkdir(parents=True)
     (out / "calib_cam_to_cam.txt").write_text((date / "calib_cam_to_cam.txt").read_text())
@@ -67,12 +277,13 @@ def blind_copy_object(root: Path, T_cam_lidar: np.ndarray, dst: Path, camera: in
     Images and scans are symbolic links; each ``calib/<stem>.txt`` is rewritten with
     ``Tr_velo_to_cam = ([I | b] R0_rect)^-1 T`` and its other lines unchanged.
     """
+    root = detect_source(root, camera).root
     out = dst / "training"
     (out / "calib").mkdir(parents=True)
     for d in (f"image_{camera}", "velodyne"):
         (out / d).symlink_to((root / d).resolve(), target_is_directory=True)
-    for cfile, files in zip(sorted((root / "calib").glob("*.txt")),
-                            detect_source(root, camera).frames):
+    for files in detect_source(root, camera).frames:
+        cfile = root / "calib" / f"{files.name}.txt"
         Tr = np.linalg.inv(files.kitti_rect) @ T_cam_lidar
         lines = [f"Tr_velo_to_cam: {' '.join(f'{v:.12e}' for v in Tr[:3].ravel())}"
                  if line.startswith("Tr_velo_to_cam:") else line
@@ -83,103 +294,359 @@ def blind_copy_object(root: Path, T_cam_lidar: np.ndarray, dst: Path, camera: in
     return out
 
 
-def run_trial(k: int, args, T_ref: np.ndarray, work: Path) -> dict:
+# --- datasets and trials --------------------------------------------------------------------
+
+@dataclass
+class Dataset:
+    """One dataset to run the trials on."""
+
+    label: str                     #: shown in the summary, and the folder name under the work dir
+    layout: str                    #: "kitti_raw", "kitti_object" or "folder"
+    path: Path                     #: what the blind copies are made from
+    T_ref: np.ndarray
+    variant: str | None = None
+    sensor_pose: np.ndarray | None = None   #: the LiDAR's pose in the cloud's frame, if moved
+    rows: list = field(default_factory=list)
+
+
+def layout_of(path: Path) -> str:
+    """The layout name of ``path`` (a generic folder is recognised by its calib.yaml alone, so
+    a folder whose ``points`` still has to be resolved is recognised too)."""
+    if (Path(path) / "calib.yaml").is_file():
+        return "folder"
+    return detect_source(path).layout
+
+
+def make_copy(ds: Dataset, T: np.ndarray, dst: Path) -> Path:
+    """The blind copy of ``ds`` holding ``T``."""
+    if ds.layout == "kitti_raw":
+        return blind_copy(ds.path, T, dst)
+    if ds.layout == "kitti_object":
+        return blind_copy_object(ds.path, T, dst)
+    return blind_copy_folder(ds.path, T, dst)
+
+
+def calibrate_options(args) -> list[str]:
+    """The options passed to ``paretocal calibrate`` beyond source, init and out."""
+    opts = []
+    if args.frames:
+        opts += ["--frames", args.frames]
+    if args.config:
+        opts += ["--config", args.config]
+    if args.init_error:
+        opts += ["--init-error", init_error_text(args)]
+    for extra in args.extra or []:
+        opts += shlex.split(extra)
+    return opts + list(args.passthrough)
+
+
+def init_error_text(args) -> str:
+    if args.init_error.strip().lower() == "box":
+        return f"{args.rot:g},{args.trans:g}"
+    return args.init_error
+
+
+def trial_start(k: int, args, T_ref: np.ndarray) -> np.ndarray:
+    """Trial ``k``'s start: the reference with the inverse of a seeded correction."""
     rng = np.random.default_rng(1000 + k)
     p = np.r_[rng.uniform(-args.trans, args.trans, 3), rng.uniform(-args.rot, args.rot, 3)]
-    T_init = T_ref @ invert(correction_matrix(p))
-    t0 = time.perf_counter()
-    if args.api:
-        from paretocal import calibrate, load_frames
-        from paretocal.config import Settings, load_settings
+    return T_ref @ invert(correction_matrix(p))
 
-        settings = load_settings(args.config) if args.config else Settings()
-        frames = load_frames(args.source, args.frames)
+
+def _run_api(args, ds: Dataset, view: Path, T_init: np.ndarray) -> dict:
+    from paretocal import calibrate
+    from paretocal.config import Settings, load_settings
+    from paretocal.errors import ParetocalError
+
+    settings = load_settings(args.config) if args.config else Settings()
+    if args.init_error:
+        deg, m = (float(v) for v in init_error_text(args).split(","))
+        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    try:
+        frames = load_frames(view, args.frames)
         r = calibrate(frames, T_init, settings)
-        T = r.T_cam_lidar
-        n = r.n_points
-    else:
-        trial = work / f"trial_{k:03d}"
-        drive = (blind_copy_object(args.source, T_init, trial / "data")
-                 if args.dataset == "object" else blind_copy(DATE, T_init, trial / "data"))
-        init = trial / "init.yaml"
-        write_extrinsic(init, T_init)
-        run = trial / "run"
-        cmd = [sys.executable, "-m", "paretocal.cli", "calibrate", str(drive), "--init",
-               str(init), "--out", str(run), "--quiet", "--no-figures"]
-        if args.frames:
-            cmd += ["--frames", args.frames]
-        if args.config:
-            cmd += ["--config", args.config]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise RuntimeError(f"trial {k}: exit {proc.returncode}: {proc.stderr.strip()}")
-        doc = json.loads((run / "result.json").read_text())
-        T = np.array(doc["T_cam_lidar"])
-        n = doc["n_points"]
+    except ParetocalError as exc:
+        return {"exit": 2, "error": str(exc)}
+    rel = r.reliability or {}
+    return {"T": r.T_cam_lidar, "n": int(r.n_points), "verdict": rel.get("verdict"),
+            "reasons": list(rel.get("reasons") or [])}
+
+
+def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
+    data = make_copy(ds, T_init, trial / "data")
+    init = trial / "init.yaml"
+    write_extrinsic(init, T_init)
+    run = trial / "run"
+    cmd = [sys.executable, "-m", "paretocal.cli", "calibrate", str(data), "--init", str(init),
+           "--out", str(run), "--quiet", "--no-figures"] + calibrate_options(args)
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode in (130, -2):
+        raise KeyboardInterrupt
+    if proc.returncode != 0:
+        lines = proc.stderr.strip().splitlines()
+        return {"exit": proc.returncode, "error": lines[-1] if lines else ""}
+    doc = json.loads((run / "result.json").read_text())
+    rel = doc.get("reliability") or {}
+    return {"T": np.array(doc["T_cam_lidar"]), "n": int(doc["n_points"]),
+            "verdict": rel.get("verdict"), "reasons": list(rel.get("reasons") or [])}
+
+
+def run_trial(k: int, args, ds: Dataset, work: Path, view: Path | None = None) -> dict:
+    """One trial on ``ds``: its row (errors, per-axis errors, verdict, wall time)."""
+    T_ref = ds.T_ref
+    T_init = trial_start(k, args, T_ref)
+    t0 = time.perf_counter()
+    out = (_run_api(args, ds, view or ds.path, T_init) if args.api
+           else _run_cli(args, ds, T_init, work / f"trial_{k:03d}"))
     e0 = pose_error(T_init, T_ref)
-    e = pose_error(T, T_ref)
-    row = {"trial": k, "start_deg": float(e0["rotation_deg"]),
-           "start_cm": float(e0["translation_cm"]), "rot_deg": float(e["rotation_deg"]),
-           "trans_cm": float(e["translation_cm"]), "n": int(n),
-           "wall_s": time.perf_counter() - t0}
+    row = {"dataset": ds.label, "trial": k, "start_deg": float(e0["rotation_deg"]),
+           "start_cm": float(e0["translation_cm"]), "wall_s": time.perf_counter() - t0}
+    if "error" in out:
+        row.update({"exit": out["exit"], "error": out["error"], "rot_deg": None,
+                    "trans_cm": None, "n": None, "verdict": None, "reasons": []})
+        row.update({a: None for a in AXES})
+        return row
+    e = pose_error(out["T"], T_ref)
+    row.update({"rot_deg": float(e["rotation_deg"]), "trans_cm": float(e["translation_cm"]),
+                "n": out["n"], "verdict": out["verdict"], "reasons": out["reasons"]})
     row.update({a: float(e[a]) for a in AXES})
+    if ds.sensor_pose is not None:
+        P = ds.sensor_pose
+        row["sensor_cm"] = float(pose_error(out["T"] @ P, T_ref @ P)["translation_cm"])
+        row["start_sensor_cm"] = float(pose_error(T_init @ P, T_ref @ P)["translation_cm"])
+    row["T_cam_lidar"] = _rows(out["T"])
     return row
 
 
-def summarise(rows: list[dict], args) -> str:
-    R = np.array([r["rot_deg"] for r in rows])
-    Tc = np.array([r["trans_cm"] for r in rows])
-    W = np.array([r["wall_s"] for r in rows])
+# --- summary --------------------------------------------------------------------------------
 
-    def stats(v):
-        return (f"mean {np.mean(v):.3f}, median {np.median(v):.3f}, "
-                f"p95 {np.percentile(v, 95):.3f}, max {np.max(v):.3f}")
+def _stats(v) -> dict:
+    v = np.asarray(v, dtype=np.float64)
+    if v.size == 0:
+        return {}
+    return {"mean": float(np.mean(v)), "median": float(np.median(v)),
+            "p95": float(np.percentile(v, 95)), "max": float(np.max(v))}
 
-    lines = [f"summary: {len(rows)} trials, start +-{args.rot} deg / +-{args.trans} m per axis, "
-             f"{args.dataset} frames {args.frames or 'all'}, "
-             f"via {'API' if args.api else 'CLI (blind copy)'}",
-             f"  rotation (deg):    {stats(R)}",
-             f"  translation (cm):  {stats(Tc)}"]
-    for a in AXES:
-        lines.append(f"  |{a}|: {stats(np.abs([r[a] for r in rows]))}")
+
+def summary_figures(rows: list[dict]) -> dict:
+    """The summary of ``rows`` as numbers (what ``summarise`` prints and --json stores)."""
+    done = [r for r in rows if "error" not in r]
+    R = np.array([r["rot_deg"] for r in done])
+    Tc = np.array([r["trans_cm"] for r in done])
+    s = {"trials": len(rows), "completed": len(done), "failed": len(rows) - len(done),
+         "start_deg": _stats([r["start_deg"] for r in rows]),
+         "start_cm": _stats([r["start_cm"] for r in rows]),
+         "rotation_deg": _stats(R), "translation_cm": _stats(Tc),
+         "axes_abs": {a: _stats(np.abs([r[a] for r in done])) for a in AXES},
+         "within": {}, "wall_s": _stats([r["wall_s"] for r in done])}
+    if any("sensor_cm" in r for r in done):
+        s["translation_at_sensor_cm"] = _stats([r["sensor_cm"] for r in done])
+        s["start_at_sensor_cm"] = _stats([r["start_sensor_cm"] for r in done])
     for rot, cm in ((1.0, 10.0), (0.5, 5.0), (0.3, 3.0)):
-        ok = int(np.sum((R < rot) & (Tc < cm)))
-        lines.append(f"  within {rot} deg and {cm:g} cm: {ok}/{len(rows)} "
-                     f"({100.0 * ok / len(rows):.0f} %)")
-    lines.append(f"  wall time per calibration (s): median {np.median(W):.0f}, max {W.max():.0f}")
+        s["within"][f"{rot:g}deg_{cm:g}cm"] = int(np.sum((R < rot) & (Tc < cm)))
+    off = [r for r in done if not (r["rot_deg"] < OFF_DEG and r["trans_cm"] < OFF_CM)]
+    good = [r for r in done if r["rot_deg"] < OFF_DEG and r["trans_cm"] < OFF_CM]
+    s["verdict"] = {
+        "off": len(off),
+        "off_flagged": sum(r["verdict"] == "unreliable" for r in off),
+        "off_passed": sum(r["verdict"] == "ok" for r in off),
+        "correct": len(good),
+        "correct_flagged": sum(r["verdict"] == "unreliable" for r in good),
+        "no_verdict": sum(r["verdict"] not in ("ok", "unreliable") for r in done),
+        "reasons": _reason_counts(done),
+    }
+    return s
+
+
+def _reason_counts(rows: list[dict]) -> dict:
+    """How often each kind of reason was given (its text up to the first colon, numbers
+    replaced by N)."""
+    counts: dict[str, int] = {}
+    for r in rows:
+        for reason in r.get("reasons") or []:
+            key = " ".join(re.sub(r"\d+(\.\d+)?", "N", reason.split(":")[0]).split())
+            counts[key] = counts.get(key, 0) + 1
+    return dict(sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
+def describe(ds: Dataset, args) -> str:
+    via = "API" if args.api else "CLI (blind copy)"
+    opts = calibrate_options(args)
+    opts = [o for i, o in enumerate(opts)
+            if o != "--frames" and (i == 0 or opts[i - 1] != "--frames")]
+    extra = f", calibrate {' '.join(opts)}" if opts else ""
+    return (f"start +-{args.rot} deg / +-{args.trans} m per axis, {ds.label} frames "
+            f"{args.frames or 'all'}, via {via}{extra}")
+
+
+def summarise(rows: list[dict], args, ds: Dataset | None = None) -> str:
+    s = summary_figures(rows)
+    n = len(rows)
+
+    def fmt(d):
+        if not d:
+            return "n/a"
+        return (f"mean {d['mean']:.3f}, median {d['median']:.3f}, p95 {d['p95']:.3f}, "
+                f"max {d['max']:.3f}")
+
+    head = describe(ds, args) if ds is not None else ""
+    lines = [f"summary: {n} trials, {head}"]
+    if ds is not None and ds.variant:
+        lines.append(f"  variant: {ds.variant} (generic folder from {ds.path})")
+    if s["failed"]:
+        lines.append(f"  failed runs (non-zero exit, counted as not within): {s['failed']}/{n}: "
+                     + "; ".join(f"trial {r['trial']} exit {r['exit']}: {r['error']}"
+                                 for r in rows if "error" in r)[:600])
+    lines += [f"  start (deg):       {fmt(s['start_deg'])}",
+              f"  start (cm):        {fmt(s['start_cm'])}",
+              f"  rotation (deg):    {fmt(s['rotation_deg'])}",
+              f"  translation (cm):  {fmt(s['translation_cm'])}"]
+    if "start_at_sensor_cm" in s:
+        lines.insert(-2, f"  start at the LiDAR sensor (cm): {fmt(s['start_at_sensor_cm'])}")
+    if "translation_at_sensor_cm" in s:
+        lines.append(f"  translation at the LiDAR sensor (cm): {fmt(s['translation_at_sensor_cm'])}")
+    for a in AXES:
+        lines.append(f"  |{a}|: {fmt(s['axes_abs'][a])}")
+    for key, ok in s["within"].items():
+        rot, cm = key.replace("deg", "").replace("cm", "").split("_")
+        lines.append(f"  within {float(rot)} deg and {cm} cm: {ok}/{n} ({100.0 * ok / n:.0f} %)")
+    v = s["verdict"]
+    lines.append(f"  verdict: {v['off']} result(s) off by {OFF_DEG:g} deg or {OFF_CM:g} cm or "
+                 f"more, {v['off_flagged']} of them flagged unreliable ({v['off_passed']} "
+                 f"passed as ok); {v['correct_flagged']} of {v['correct']} correct results "
+                 f"flagged unreliable" + (f"; {v['no_verdict']} without a verdict"
+                                          if v["no_verdict"] else ""))
+    for reason, count in v["reasons"].items():
+        lines.append(f"    reason x{count}: {reason}")
+    if s["wall_s"]:
+        lines.append(f"  wall time per calibration (s): median {s['wall_s']['median']:.0f}, "
+                     f"max {s['wall_s']['max']:.0f}")
     return "\n".join(lines)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+# --- main -----------------------------------------------------------------------------------
+
+def datasets(args, work: Path) -> list[Dataset]:
+    """The datasets of the command line (variant folders are built under ``work``)."""
+    if args.source is not None:
+        source = Path(args.source)
+    else:
+        source = DATE if args.dataset == "raw" else OBJECT
+    if not source.exists():
+        raise SystemExit(f"accuracy.py: {source}: not found")
+    variants = parse_variants(args.variant)
+    if variants:
+        out = []
+        for name in variants:
+            folder, T_ref, pose = build_variant(source, name, work / "variants" / name)
+            moved = None if np.allclose(pose, np.eye(4)) else pose
+            label = f"{'KITTI object' if layout_of(source) == 'kitti_object' else 'KITTI raw'}" \
+                    f" variant {name}"
+            out.append(Dataset(label, "folder", folder, T_ref, name, moved))
+        return out
+    layout = layout_of(source)
+    if layout == "folder":
+        T_ref = folder_reference(source)
+        label = f"folder {source}"
+    else:
+        T_ref = detect_source(source).frames[0].T_ref
+        label = {"kitti_raw": "raw", "kitti_object": "object"}[layout]
+        if args.source is not None:
+            label = f"{label} {source}"
+    return [Dataset(label, layout, source, T_ref)]
+
+
+def _slug(label: str) -> str:
+    return "".join(c if c.isalnum() or c in "-+." else "_" for c in label).strip("_")[-80:]
+
+
+def _json_doc(args, argv, sets: list[Dataset]) -> dict:
+    return {"argv": argv, "rot": args.rot, "trans": args.trans, "frames": args.frames,
+            "api": bool(args.api), "calibrate_options": calibrate_options(args),
+            "datasets": [{"label": d.label, "layout": d.layout, "path": str(d.path),
+                          "variant": d.variant, "T_ref": _rows(d.T_ref),
+                          "sensor_pose": None if d.sensor_pose is None else _rows(d.sensor_pose),
+                          "trials": d.rows,
+                          "summary": summary_figures(d.rows) if d.rows else None}
+                         for d in sets]}
+
+
+def parse_args(argv: list[str]):
+    passthrough: list[str] = []
+    if "--" in argv:
+        i = argv.index("--")
+        argv, passthrough = argv[:i], argv[i + 1:]
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 epilog="Options after -- are passed to paretocal calibrate.")
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--rot", type=float, default=10.0, help="per-axis bound, deg")
     ap.add_argument("--trans", type=float, default=0.25, help="per-axis bound, m")
     ap.add_argument("--dataset", choices=("raw", "object"), default="raw",
-                    help="the 20-frame raw drive, or the single KITTI object frame (another "
-                         "scene, not used to tune anything)")
+                    help="shortcut for the sample data: the 20-frame raw drive, or the single "
+                         "KITTI object frame (another scene, not used to tune anything)")
+    ap.add_argument("--source", default=None,
+                    help="any dataset folder paretocal reads, with a reference extrinsic "
+                         "(overrides --dataset)")
+    ap.add_argument("--variant", action="append", default=None,
+                    help=f"rig variant(s) of the KITTI source, repeatable or a comma list: "
+                         f"{', '.join(VARIANTS)} (a+b chains)")
     ap.add_argument("--frames", default=None, help="frame selection, e.g. 0:10")
     ap.add_argument("--config", default=None, help="settings file (YAML/JSON by section)")
+    ap.add_argument("--init-error", default=None, metavar="DEG,M",
+                    help="passed to paretocal calibrate --init-error ('box': ROT,TRANS)")
+    ap.add_argument("--extra", action="append", default=None, metavar="OPTIONS",
+                    help="more options for paretocal calibrate, one string (repeatable)")
     ap.add_argument("--api", action="store_true", help="call the library, not the CLI")
-    ap.add_argument("--json", default=None, help="also write the trials to this JSON file")
+    ap.add_argument("--json", default=None, help="also write the trials and summaries here")
     ap.add_argument("--keep", default=None, help="keep the blind copies and runs here")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    args.passthrough = passthrough
+    if args.init_error and args.init_error.strip().lower() != "box":
+        try:
+            _deg, _m = (float(v) for v in args.init_error.split(","))
+        except ValueError:
+            ap.error(f"--init-error {args.init_error}: expected DEG,M (e.g. 5,0.2) or box")
+    if args.api and (args.extra or passthrough):
+        ap.error("--extra and -- options go to the CLI; they cannot be used with --api")
+    if args.keep and Path(args.keep).exists() and any(Path(args.keep).iterdir()):
+        ap.error(f"--keep {args.keep}: the folder is not empty")
+    return args
 
-    args.source = DATE if args.dataset == "raw" else DATA / "kitti_object" / "training"
-    T_ref = detect_source(args.source).frames[0].T_ref
-    rows = []
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="paretocal-acc-") as tmp:
         work = Path(args.keep) if args.keep else Path(tmp)
-        for k in range(args.first_seed, args.first_seed + args.trials):
-            row = run_trial(k, args, T_ref, work)
-            rows.append(row)
-            print(f"trial {k:3d}: start {row['start_deg']:5.2f} deg {row['start_cm']:6.1f} cm -> "
-                  f"{row['rot_deg']:.3f} deg {row['trans_cm']:.2f} cm (n = {row['n']}) "
-                  f"{row['wall_s']:.0f} s", flush=True)
-            if args.json:
-                Path(args.json).write_text(json.dumps(rows, indent=1))
-    print(summarise(rows, args))
+        work.mkdir(parents=True, exist_ok=True)
+        sets = datasets(args, work)
+        summaries = []
+        for ds in sets:
+            dwork = work / _slug(ds.label) if len(sets) > 1 or args.variant else work
+            dwork.mkdir(parents=True, exist_ok=True)
+            view = None
+            if args.api and ds.layout == "folder":   # links resolved, reference kept
+                view = blind_copy_folder(ds.path, ds.T_ref, dwork / "view")
+            print(f"dataset: {ds.label} [{ds.layout}]", flush=True)
+            for k in range(args.first_seed, args.first_seed + args.trials):
+                row = run_trial(k, args, ds, dwork, view)
+                ds.rows.append(row)
+                if "error" in row:
+                    print(f"trial {k:3d}: start {row['start_deg']:5.2f} deg "
+                          f"{row['start_cm']:6.1f} cm -> failed (exit {row['exit']}): "
+                          f"{row['error']}", flush=True)
+                else:
+                    print(f"trial {k:3d}: start {row['start_deg']:5.2f} deg "
+                          f"{row['start_cm']:6.1f} cm -> {row['rot_deg']:.3f} deg "
+                          f"{row['trans_cm']:.2f} cm (n = {row['n']}) {row['wall_s']:.0f} s "
+                          f"{row['verdict'] or 'no verdict'}", flush=True)
+                if args.json:
+                    Path(args.json).write_text(json.dumps(_json_doc(args, argv, sets), indent=1))
+            summaries.append(summarise(ds.rows, args, ds))
+            print(summaries[-1], flush=True)
+        if len(summaries) > 1:
+            print("\n" + "\n".join(summaries))
     return 0
 
 
