@@ -87,6 +87,25 @@ class _Progress:
             self.bar.__exit__(*exc)
 
 
+def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
+    """``"DEG,M"`` (or a two-item list) -> (deg, m); (None, None) for None."""
+    import math
+
+    if text is None:
+        return None, None
+    items = text if isinstance(text, (list, tuple)) else str(text).replace(" ", "").split(",")
+    try:
+        deg, m = (float(v) for v in items)
+        ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise SettingsError(f"{where} {text!r}: expected DEG,M, two positive numbers (the "
+                            "rotation in degrees and the translation in metres per axis, "
+                            "e.g. 5,0.2)")
+    return deg, m
+
+
 def _fmt_err(e: dict | None) -> str:
     if not e:
         return "n/a"
@@ -122,6 +141,10 @@ def calibrate(
                                 "one (default 1).")] = None,
     n_min: Annotated[Optional[int], typer.Option("--n-min", help="Fewest feature points per frame.")] = None,
     n_max: Annotated[Optional[int], typer.Option("--n-max", help="Most feature points per frame.")] = None,
+    init_error: Annotated[Optional[str], typer.Option(
+        "--init-error", metavar="DEG,M",
+        help="How far off the initial extrinsic may be, per axis (default 10,0.3; also "
+             "init_error in calib.yaml). The search box is 1.5 times this.")] = None,
     bound_t: Annotated[Optional[float], typer.Option("--bound-t", help="Translation bound (+- m).")] = None,
     bound_r: Annotated[Optional[float], typer.Option("--bound-r", help="Rotation bound (+- deg).")] = None,
     chamfer: Annotated[Optional[Chamfer], typer.Option(help="Alignment objective.")] = None,
@@ -151,9 +174,11 @@ def calibrate(
     settings = load_settings(config)
     if budget_ms is not None and rule is None:
         rule = Rule.budget
+    err_deg, err_m = parse_init_error(init_error, "--init-error")
     settings = settings.replace(
         search={"pop": pop, "gens": gens, "seed": seed, "n_min": n_min, "n_max": n_max,
-                "bound_t_m": bound_t, "bound_r_deg": bound_r},
+                "bound_t_m": bound_t, "bound_r_deg": bound_r, "init_error_deg": err_deg,
+                "init_error_m": err_m},
         objective={"chamfer": chamfer.value if chamfer else None, "w_edge": w_edge,
                    "cost": cost.value if cost else None,
                    "evaluator": evaluator.value if evaluator else None},

@@ -65,6 +65,15 @@ class ObjectiveSettings:
     evaluator: str = "auto"          #: "auto", "numba" or "numpy"
 
 
+#: The search box is this many times the stated initial error per axis: a start at the edge
+#: of its stated error still has room around the truth for the search to settle.
+BOX_MARGIN = 1.5
+#: Smallest box (m, deg): the objective's own optimum can lie a few cm / tenths of a degree
+#: from the truth, and the polish needs room around it.
+MIN_BOUND_T_M = 0.05
+MIN_BOUND_R_DEG = 1.0
+
+
 @dataclass(frozen=True)
 class SearchSettings:
     """NSGA-II over ``[x, y, z, yaw, pitch, roll, n]`` (see :mod:`paretocal.search`)."""
@@ -73,8 +82,11 @@ class SearchSettings:
     gens: int = 120
     engine: str = "lean"             #: "lean" (arrays + pymoo operators) or "pymoo" (its NSGA2)
     seed: int = 0
-    bound_t_m: float = 1.5           #: +- bound of x, y, z (m)
-    bound_r_deg: float = 25.0        #: +- bound of yaw, pitch, roll (deg)
+    #: How far off the initial extrinsic may be, per axis (deg, m): sets the search box.
+    init_error_deg: float = 10.0
+    init_error_m: float = 0.3
+    bound_t_m: float | None = None   #: +- bound of x, y, z (m); None: from init_error_m
+    bound_r_deg: float | None = None  #: +- bound of yaw, pitch, roll (deg); None: from init_error
     n_min: int | None = None         #: feature points per frame; None -> automatic
     n_max: int | None = None
     sbx_prob: float = 0.9
@@ -87,6 +99,21 @@ class SearchSettings:
     seed_points: int = 200           #: points per frame for the grid
     seed_count: int = 8              #: grid poses placed in the initial population
     seed_grid_t_m: float | None = None  #: joint rotation x translation grid step (m); off
+
+    @property
+    def bound_t(self) -> float:
+        """The translation bound in effect (m): ``bound_t_m`` or ``BOX_MARGIN`` times the
+        stated initial error (at least ``MIN_BOUND_T_M``)."""
+        if self.bound_t_m is not None:
+            return float(self.bound_t_m)
+        return max(BOX_MARGIN * self.init_error_m, MIN_BOUND_T_M)
+
+    @property
+    def bound_r(self) -> float:
+        """The rotation bound in effect (deg), like :attr:`bound_t`."""
+        if self.bound_r_deg is not None:
+            return float(self.bound_r_deg)
+        return min(max(BOX_MARGIN * self.init_error_deg, MIN_BOUND_R_DEG), 90.0)
 
 
 @dataclass(frozen=True)
@@ -157,14 +184,20 @@ class Settings:
             raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
         if s.seed < 0:
             raise SettingsError(f"--seed {s.seed}: must be 0 or more")
-        if not s.bound_t_m > 0:
+        if s.bound_t_m is not None and not s.bound_t_m > 0:
             raise SettingsError(f"--bound-t {s.bound_t_m:g}: the translation bound must be "
                                 "positive (metres, +- around the initial extrinsic)")
-        if not s.bound_r_deg > 0:
+        if s.bound_r_deg is not None and not s.bound_r_deg > 0:
             raise SettingsError(f"--bound-r {s.bound_r_deg:g}: the rotation bound must be "
                                 "positive (degrees, +- around the initial extrinsic)")
-        if s.bound_r_deg > 90:
+        if s.bound_r_deg is not None and s.bound_r_deg > 90:
             raise SettingsError(f"--bound-r {s.bound_r_deg:g}: at most 90 degrees")
+        if not (s.init_error_deg > 0 and s.init_error_m > 0):
+            raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: both the "
+                                "rotation (deg) and the translation (m) must be positive")
+        if s.init_error_deg > 60:
+            raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: at most "
+                                "60 degrees (a start further off is not an initial guess)")
         if s.n_min is not None and s.n_max is not None and s.n_min > s.n_max:
             raise SettingsError(f"--n-min {s.n_min} is larger than --n-max {s.n_max}")
         if s.n_min is not None and s.n_min < 1:

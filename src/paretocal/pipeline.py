@@ -23,6 +23,7 @@ from .quality import quality_report
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
+from .search.basin import CLEAR_P, prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
 
 log = logging.getLogger(__name__)
@@ -319,14 +320,15 @@ def reliability(result: "CalibrationResult") -> dict:
         reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
                        f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
     s = result.settings.search
-    bound = np.r_[[s.bound_t_m] * 3, [s.bound_r_deg] * 3]
+    bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
     x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)
     at_bound = [a for a, v, b in zip(AXES, x, bound)
                 if abs(v) >= (1.0 - RELIABLE_BOUND_MARGIN) * b]
     if at_bound:
         reasons.append(f"the correction sits at the search bound on {', '.join(at_bound)} "
-                       f"(+-{s.bound_t_m:g} m, +-{s.bound_r_deg:g} deg): the optimum may lie "
-                       "outside; widen --bound-t / --bound-r or improve --init")
+                       f"(+-{s.bound_t:g} m, +-{s.bound_r:g} deg): the optimum may lie "
+                       "outside; if the initial extrinsic may be further off, say so with "
+                       "--init-error, or improve --init")
     q = result.quality or {}
     step = q.get("step_to_local_optimum")
     if step is not None:
@@ -338,6 +340,21 @@ def reliability(result: "CalibrationResult") -> dict:
             reasons.append(f"the objective still falls beyond the search bound on "
                            f"{', '.join(beyond)}: the optimum lies outside the box; widen "
                            "--bound-t / --bound-r")
+    basin = (result.decision or {}).get("basin") or {}
+    if basin and not basin.get("same_basin", True):
+        alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
+        if basin.get("kept") == "near":
+            reasons.append(
+                f"ambiguous: a pose {alt} away fits the frames about as well (paired test "
+                f"over {basin['frames']} frames: p = {basin['p']:.2g}, {CLEAR_P:g} needed); the "
+                "result is the optimum next to the initial extrinsic; add frames with more "
+                "varied structure, or state a smaller --init-error if the start is known to "
+                "be close")
+    rings = (result.feature_counts or {}).get("ring_recovery") or {}
+    if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
+        reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
+                       f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
+                       "field or the LiDAR's pose (lidar_pose) in calib.yaml")
     se = q.get("jackknife_se") or {}
     units = q.get("units") or {}
     se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
@@ -470,15 +487,20 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
 
     X, F = res.X, res.F
     evaluations = res.evaluations
+    basin = None
     steps = 1 + int(settings.features.reselect)
     if d.refine:
         t0 = time.perf_counter()
         if progress is not None:
             progress("polish", 0, steps)
         X, F, ev = polish_front(objective, X, F, settings, n_min, n_max)
+        evaluations += ev
+        # A pose far from the start replaces the start's own basin only when the frames
+        # clearly prefer it (search.basin).
+        X, F, basin, ev = prefer_near(objective, X, F, settings, n_min, n_max)
+        evaluations += ev
         if progress is not None:
             progress("polish", 1, steps)
-        evaluations += ev
         timings["polish"] = time.perf_counter() - t0
         if settings.features.reselect:
             # Choose the feature points again, by what is in view at the estimate rather than
@@ -521,7 +543,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
                          d.max_deviation_px)
     decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6]))})
+                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
+                     "basin": basin})
     quality = quality_report(objective, X[i])
     wall = time.perf_counter() - t_start
     timings["total"] = wall

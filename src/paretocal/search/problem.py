@@ -16,7 +16,7 @@ UNITS = ("m", "m", "m", "deg", "deg", "deg", "points")
 
 def bounds(settings: SearchSettings, n_min: int, n_max: int) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of the seven variables, shape (7,) each."""
-    t, r = settings.bound_t_m, settings.bound_r_deg
+    t, r = settings.bound_t, settings.bound_r
     xl = np.array([-t, -t, -t, -r, -r, -r, n_min], dtype=np.float64)
     xu = np.array([t, t, t, r, r, r, n_max], dtype=np.float64)
     return xl, xu

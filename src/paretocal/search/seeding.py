@@ -123,7 +123,7 @@ def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) ->
     z_min, outside = settings.features.z_min, settings.objective.outside
     scene = build_scene(coarse, z_min, outside)
     obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
-    step_t = s.seed_grid_t_m if s.seed_grid_t_m and s.bound_t_m > s.seed_grid_t_m else None
+    step_t = s.seed_grid_t_m if s.seed_grid_t_m and s.bound_t > s.seed_grid_t_m else None
     joint = None
     if step_t and len(coarse) > JOINT_FRAMES:
         # The joint grid is large: score it on a few frames spread over the sequence.
@@ -131,7 +131,7 @@ def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) ->
         few = build_scene([coarse[i] for i in pick], z_min, outside)
         jobj = CalibrationObjective(few, T_init, settings.objective, cost_model, ucb_k=0.0)
         joint = lambda Z: jobj.chamfer(Z)["f1"]  # noqa: E731
-    poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r_deg, s.bound_t_m,
+    poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r, s.bound_t,
                           s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count,
                           step_t_m=step_t, joint_chamfer=joint)
     return poses
