@@ -228,6 +228,20 @@ def test_pose_trajectory_agrees_with_twist_when_sampled_densely():
     assert np.abs(a - b).max() < 1e-3
 
 
+def test_motion_inputs_are_checked():
+    with pytest.raises(ValueError, match="3 finite numbers"):
+        Twist([1.0, 2.0])
+    with pytest.raises(ValueError, match="3 finite numbers"):
+        Twist([1.0, 0.0, 0.0], [np.nan, 0.0, 0.0])
+    eye = np.tile(np.eye(4), (2, 1, 1))
+    with pytest.raises(ValueError, match="strictly increasing"):
+        PoseTrajectory([1.0, 1.0], eye)
+    with pytest.raises(ValueError, match="shape"):
+        PoseTrajectory([0.0, 1.0, 2.0], eye)
+    with pytest.raises(ValueError, match="at least 2"):
+        PoseTrajectory([0.0], eye[:1])
+
+
 def test_deskew_rejects_missing_or_bad_time():
     xyz = np.zeros((3, 3))
     with pytest.raises(ValueError, match="no per-point time"):
