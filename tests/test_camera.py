@@ -1,7 +1,10 @@
+import math
+
+import cv2
 import numpy as np
 import pytest
 
-from paretocal.camera import project
+from paretocal.camera import MEI, N_PARAMS, Camera, in_image, project
 from paretocal.io.layouts import detect_source
 from paretocal.io.readers import read_kitti_calib
 
@@ -75,3 +78,170 @@ class TestKittiProjection:
 
 def test_source_detection_on_object_parent(data):
     assert detect_source(data / "kitti_object").layout == "kitti_object"
+
+
+# --- lens models ---------------------------------------------------------------------------------
+
+#: The aiMotive sample's cameras (data/aimotive/*/calib.yaml).
+AIM_PIN_K = np.array([[1170.7994384765625, 0.0, 640.0], [0.0, 1001.1844482421875, 352.0],
+                      [0.0, 0.0, 1.0]])
+AIM_PIN_D = [-0.30073606967926025, 0.08419033139944077, 0.002034867648035288,
+             0.0006097130244597793, 0.0]
+AIM_MEI_K = np.array([[575.2252458162137, 0.0, 641.9449779750069],
+                      [0.0, 501.2711423954533, 344.73654890450604], [0.0, 0.0, 1.0]])
+AIM_MEI_D = [0.03364013761086061, -0.08420780755924384, 0.0, 0.0, 0.0]
+AIM_MEI_XI = 1.0222136193840399
+
+
+def _mei_by_hand(p, K, D, xi):
+    """The unified model written out with the math module, point by point."""
+    k1, k2, p1, p2, k3 = D
+    out = []
+    for X, Y, Z in p:
+        n = math.sqrt(X * X + Y * Y + Z * Z)
+        xs, ys, zs = X / n, Y / n, Z / n
+        mx, my = xs / (zs + xi), ys / (zs + xi)
+        r2 = mx * mx + my * my
+        c = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        xd = mx * c + 2 * p1 * mx * my + p2 * (r2 + 2 * mx * mx)
+        yd = my * c + p1 * (r2 + 2 * my * my) + 2 * p2 * mx * my
+        out.append((K[0][0] * xd + K[0][2], K[1][1] * yd + K[1][2]))
+    return np.array(out)
+
+
+def _mei():
+    return Camera(AIM_MEI_K, 1280, 704, "mei", AIM_MEI_D, xi=AIM_MEI_XI)
+
+
+class TestLensModels:
+    def test_mei_matches_the_formulas_by_hand(self):
+        cam = _mei()
+        # Ahead, to the side, and one behind the image plane that the wide lens still sees.
+        p = np.array([[1.0, 0.5, 2.0], [-3.0, 1.0, 1.0], [2.0, -1.0, -0.2], [0.0, 0.0, 7.0],
+                      [0.3, -0.2, 40.0]])
+        uv, valid = cam.project_camera_points(p)
+        assert valid.all()
+        np.testing.assert_allclose(uv, _mei_by_hand(p, AIM_MEI_K, AIM_MEI_D, AIM_MEI_XI),
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(uv[3], AIM_MEI_K[:2, 2], atol=1e-12)     # the axis
+
+    @pytest.mark.parametrize("D", [AIM_PIN_D, [-0.28, 0.09, 0.0008, -0.0005],
+                                   [0.1, 0.01, 0.001, -0.002, 0.0, 0.2, 0.01, 0.001],
+                                   [-0.1, 0.02, 0.001, 0.002, -0.001, 0.0, 0.0, 0.0,
+                                    0.001, -0.0005, 0.0007, 0.0002]])
+    def test_radtan_matches_opencv(self, rng, D):
+        cam = Camera(AIM_PIN_K, 1280, 704, "pinhole", D)
+        p = np.column_stack([rng.uniform(-0.5, 0.5, 500), rng.uniform(-0.35, 0.35, 500),
+                             np.ones(500)]) * rng.uniform(0.5, 80, (500, 1))
+        uv, valid = cam.project_camera_points(p)
+        expect, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), AIM_PIN_K, np.array(D))
+        assert valid.all()
+        np.testing.assert_allclose(uv, expect[:, 0], rtol=0, atol=1e-8)
+
+    def test_fisheye_matches_opencv(self, rng):
+        K = np.array([[300.0, 0, 319.5], [0, 310.0, 239.5], [0, 0, 1]])
+        D = [0.08, -0.03, 0.01, -0.002]
+        cam = Camera(K, 640, 480, "fisheye", D)
+        p = np.column_stack([rng.uniform(-2, 2, 500), rng.uniform(-2, 2, 500),
+                             rng.uniform(0.2, 3, 500)])
+        uv, valid = cam.project_camera_points(p)
+        expect, _ = cv2.fisheye.projectPoints(p[:, None, :], np.zeros(3), np.zeros(3), K,
+                                              np.array(D))
+        assert valid.all()
+        np.testing.assert_allclose(uv, expect[:, 0], rtol=0, atol=1e-8)
+
+    @pytest.mark.parametrize("make", [
+        lambda: Camera(AIM_PIN_K, 1280, 704, "pinhole", AIM_PIN_D),
+        lambda: Camera(np.array([[400.0, 1.5, 330], [0, 420, 250], [0, 0, 1]]), 640, 480,
+                       "pinhole", [0.1, 0.01, 0.001, -0.002, 0.0, 0.2, 0.01, 0.001,
+                                   0.001, -0.0005, 0.0007, 0.0002]),
+        lambda: Camera(AIM_PIN_K, 1280, 704),
+        lambda: Camera(np.array([[300.0, 0, 319.5], [0, 310.0, 239.5], [0, 0, 1]]), 640, 480,
+                       "fisheye", [0.08, -0.03, 0.01, -0.002]),
+        _mei,
+        lambda: Camera(AIM_MEI_K, 1280, 704, "mei", [0.0, 0.0, 0.001, -0.002], xi=0.8),
+    ], ids=["radtan", "rational-prism-skew", "ideal", "fisheye", "mei", "mei-xi<1"])
+    def test_unproject_inverts_project(self, make, rng):
+        cam = make()
+        v, u = np.mgrid[0:cam.height:3, 0:cam.width:3].astype(np.float64)
+        uv = np.stack([u.ravel(), v.ravel()], axis=1) + rng.uniform(0, 1, (u.size, 2))
+        ray = cam.unproject(uv)
+        ok = np.isfinite(ray).all(axis=1)
+        assert ok.mean() > 0.85
+        np.testing.assert_allclose(np.linalg.norm(ray[ok], axis=1), 1.0, atol=1e-12)
+        back, valid = cam.project_camera_points(ray[ok] * rng.uniform(0.5, 50, (ok.sum(), 1)))
+        assert valid.all()
+        assert np.abs(back - uv[ok]).max() < 1e-6
+        # And from points: a valid point's pixel unprojects to the point's direction.
+        p = rng.normal(size=(2000, 3)) * [1, 1, 0.5] + [0, 0, 1.0]
+        uvp, vp = cam.project_camera_points(p)
+        keep = vp & in_image(uvp, cam.width, cam.height)
+        r = cam.unproject(uvp[keep])
+        d = p[keep] / np.linalg.norm(p[keep], axis=1, keepdims=True)
+        assert keep.sum() > 100 and np.abs(r - d).max() < 1e-9
+
+    def test_mei_fold_back_is_invalid(self):
+        cam = _mei()
+        # The distortion turns back where 1 + 3 k1 r^2 + 5 k2 r^4 = 0 (aimotive/README.md:
+        # r = 1.29, about 106 degrees off the axis).
+        k1, k2 = AIM_MEI_D[:2]
+        s = (-3 * k1 - math.sqrt(9 * k1 * k1 - 20 * k2)) / (10 * k2)
+        assert cam.r_limit == pytest.approx(math.sqrt(s), rel=1e-12)
+        assert cam.r_limit == pytest.approx(1.29, abs=0.005)
+        # 115 degrees off the axis, in the horizontal plane: beyond the limit, where the lens
+        # formula would put the point back inside the image, among valid pixels.
+        a = math.radians(115)
+        p = np.array([[math.sin(a), 0.0, math.cos(a)], [math.sin(1.7), 0.0, math.cos(1.7)]])
+        folded = _mei_by_hand(p[:1], AIM_MEI_K, AIM_MEI_D, AIM_MEI_XI)[0]
+        assert 0 <= folded[0] <= 1279 and 0 <= folded[1] <= 703
+        uv, valid = cam.project_camera_points(p)
+        assert valid.tolist() == [False, True]          # 1.7 rad = 97 deg is inside the limit
+        assert np.isnan(uv[0]).all()
+        # No valid pixel is reached twice: the fold-back pixel unprojects to the valid ray.
+        ray = cam.unproject(folded[None])[0]
+        assert np.isfinite(ray).all() and math.degrees(math.acos(ray[2])) < 106
+
+    def test_radtan_and_fisheye_fold_back_are_invalid(self):
+        K = np.array([[500.0, 0, 500], [0, 500, 500], [0, 0, 1]])
+        cam = Camera(K, 1000, 1000, "pinhole", [-0.4, 0.0, 0.0, 0.0])
+        assert cam.r_limit == pytest.approx(1 / math.sqrt(1.2), rel=1e-12)   # 1 - 1.2 r^2 = 0
+        p = np.array([[1.2, 0.0, 1.0], [0.85, 0.0, 1.0]])
+        uv, valid = cam.project_camera_points(p)
+        assert valid.tolist() == [False, True]
+        assert 0 <= 500 + 500 * 1.2 * (1 - 0.4 * 1.44) <= 999           # where it would fold
+        fish = Camera(K, 1000, 1000, "fisheye", [-0.1, 0.0, 0.0, 0.0])
+        assert fish.r_limit == pytest.approx(math.sqrt(1 / 0.3), rel=1e-12)
+        p = np.array([[math.sin(2.2), 0.0, math.cos(2.2)], [math.sin(1.7), 0.0, math.cos(1.7)]])
+        assert fish.project_camera_points(p)[1].tolist() == [False, True]
+        # Beyond the limit the image holds nothing the lens can see: those pixels are masked.
+        assert not cam.valid_pixels.all() and cam.valid_pixels[500, 500]
+        corner = cam.unproject(np.array([[0.0, 0.0], [999.0, 999.0]]))
+        assert np.isnan(corner).all()
+
+    def test_valid_pixels_of_the_mei_sample(self):
+        cam = _mei()
+        vp = cam.valid_pixels
+        assert vp.shape == (704, 1280) and 0.8 < vp.mean() < 0.95
+        assert vp[345, 642] and not vp[0, 0] and not vp[703, 1279]
+        assert Camera(AIM_PIN_K, 1280, 704, "pinhole", AIM_PIN_D).valid_pixels.all()
+
+    def test_kernel_row_and_validation(self):
+        cam = _mei()
+        row = cam.kernel_params()
+        assert row.shape == (N_PARAMS,) and row[0] == MEI and row[6] == AIM_MEI_XI
+        assert row[19] == pytest.approx(cam.r_limit ** 2)
+        assert Camera(AIM_PIN_K, 1280, 704, "pinhole", [0, 0, 0, 0, 0]).ideal
+        with pytest.raises(ValueError, match="xi"):
+            Camera(AIM_MEI_K, 1280, 704, "mei", AIM_MEI_D, xi=-1.0)
+        with pytest.raises(ValueError, match="tilted"):
+            Camera(AIM_PIN_K, 1280, 704, "pinhole", [0.0] * 13 + [0.01])
+        with pytest.raises(ValueError, match="model"):
+            Camera(AIM_PIN_K, 1280, 704, "omnidir")
+        assert {cam: 1}[cam] == 1                                # hashable (by identity)
+
+    def test_project_with_distortion_returns_depth_and_visibility(self):
+        cam = Camera(AIM_PIN_K, 1280, 704, "pinhole", AIM_PIN_D)
+        pts = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, -5.0], [100.0, 0.0, 1.0]])
+        uv, z, vis = project(pts, cam, np.eye(4))
+        assert z.tolist() == [5.0, -5.0, 1.0] and vis.tolist() == [True, False, False]
+        np.testing.assert_allclose(uv[0], [640.0, 352.0])

@@ -87,25 +87,26 @@ def reprojection_deviation(T: np.ndarray, T_best: np.ndarray, points: list[np.nd
     Returns
     -------
     ndarray, shape (k,)
-        Mean over the points visible under ``T_best`` of ``|uv(T_i) - uv(T_best)|`` in pixels;
-        a point that falls behind the camera under ``T_i`` counts as the image diagonal.
+        Mean over the points visible under ``T_best`` of ``|uv(T_i) - uv(T_best)|`` in pixels,
+        projected through each camera's model; a point that leaves the model's domain under
+        ``T_i`` (behind the camera, beyond the lens's monotonic radius) counts as the image
+        diagonal.
     """
     from .camera import project
 
+    T = np.asarray(T, dtype=np.float64)
     total = np.zeros(len(T))
     count = 0
     for pts, cam in zip(points, cameras):
         uv0, _, vis = project(pts, cam, T_best, z_min)
         if not vis.any():
             continue
-        P = pts[vis].astype(np.float64)
+        P = np.asarray(pts, dtype=np.float64)[vis, :3]
         diag = float(np.hypot(cam.width, cam.height))
-        A = cam.projection(T)                                     # (k, 3, 4)
-        H = np.einsum("kij,mj->kmi", A[:, :, :3], P) + A[:, None, :, 3]
-        z = H[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.linalg.norm(H[..., :2] / z[..., None] - uv0[vis][None], axis=-1)
-        d = np.where(z > z_min, np.minimum(d, diag), diag)
+        Xc = np.einsum("kij,mj->kmi", T[:, :3, :3], P) + T[:, None, :3, 3]   # (k, m, 3)
+        uv, valid = cam.project_camera_points(Xc, z_min)
+        d = np.linalg.norm(uv - uv0[vis][None], axis=-1)
+        d = np.where(valid, np.minimum(d, diag), diag)
         total += d.sum(axis=1)
         count += int(vis.sum())
     return total / max(count, 1)
