@@ -1,6 +1,9 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
+from paretocal.camera import Camera
 from paretocal.config import Settings
 from paretocal.geometry import apply_correction
 from paretocal.objective import (CalibrationObjective, build_scene, combine, get_evaluator,
@@ -31,7 +34,7 @@ class TestEvaluators:
     def test_numba_equals_numpy(self, scene_and_feats, rng):
         scene, feats, T = scene_and_feats
         X = _population(T, int(scene.points_per_frame.max()), rng)
-        A = scene.projections(apply_correction(T, X))
+        A = apply_correction(T, X)
         n = X[:, 6].astype(np.int64)
         a, b = sums_numba(scene, A, n), sums_numpy(scene, A, n)
         for u, v in zip(a, b):
@@ -40,7 +43,7 @@ class TestEvaluators:
     def test_close_to_exact_kdtree_oracle(self, scene_and_feats, rng):
         scene, feats, T = scene_and_feats
         X = _population(T, int(scene.points_per_frame.max()), rng, C=8)
-        A = scene.projections(apply_correction(T, X))
+        A = apply_correction(T, X)
         n = X[:, 6].astype(np.int64)
         K1, _, kin = sums_kdtree(scene, [f.image.edge_uv for f in feats], A, n)
         for evaluator in (sums_numba, sums_numpy):
@@ -55,7 +58,7 @@ class TestEvaluators:
         scene, feats, T = scene_and_feats
         T_away = T.copy()
         T_away[:3, 3] += [0.0, 0.0, -500.0]           # everything behind the camera
-        A = scene.projections(T_away[None])
+        A = T_away[None]
         n = np.array([int(scene.points_per_frame.max())])
         S1, S2, nin = sums_numba(scene, A, n)
         assert nin.sum() == 0
@@ -76,6 +79,61 @@ class TestEvaluators:
     def test_auto_prefers_numba(self):
         assert get_evaluator("auto") is sums_numba
         assert get_evaluator("numpy") is sums_numpy
+
+
+def _with_cameras(scene, cam):
+    """The scene with every frame seen through ``cam`` (same points and distance transforms)."""
+    return dataclasses.replace(scene, cameras=[cam] * scene.n_frames,
+                               cam_params=np.stack([cam.kernel_params()] * scene.n_frames))
+
+
+def _lens_cameras(K):
+    """A strongly distorted pinhole (the aiMotive front camera's D), a rational pinhole with
+    thin-prism terms and skew, a fisheye and a Mei camera (the aiMotive fisheye's D and xi),
+    all at KITTI's K and image size so the sample frames' features serve."""
+    Ks = K.copy()
+    Ks[0, 1] = 2.0
+    return {
+        "radtan": Camera(K, 1242, 375, "pinhole", [-0.3007, 0.0842, 0.00203, 0.00061, 0.0]),
+        "rational": Camera(Ks, 1242, 375, "pinhole", [0.1, 0.01, 0.001, -0.002, 0.0, 0.2,
+                                                      0.01, 0.001, 0.001, -0.0005, 0.0007,
+                                                      0.0002]),
+        "fisheye": Camera(K, 1242, 375, "fisheye", [0.08, -0.03, 0.01, -0.002]),
+        "mei": Camera(K, 1242, 375, "mei", [0.0336, -0.0842, 0.0, 0.0, 0.0], xi=1.0222),
+    }
+
+
+@pytest.mark.parametrize("lens", ["radtan", "rational", "fisheye", "mei"])
+class TestEvaluatorsThroughLensModels:
+    def test_numba_numpy_kdtree_agree(self, scene_and_feats, rng, lens):
+        scene, feats, T = scene_and_feats
+        sc = _with_cameras(scene, _lens_cameras(feats[0].camera.K)[lens])
+        X = _population(T, int(sc.points_per_frame.max()), rng, C=8)
+        Ts = apply_correction(T, X)
+        n = X[:, 6].astype(np.int64)
+        a, b = sums_numba(sc, Ts, n), sums_numpy(sc, Ts, n)
+        for u, v in zip(a, b):
+            np.testing.assert_allclose(u, v, rtol=1e-9, atol=1e-6)
+        K1, _, kin = sums_kdtree(sc, [f.image.edge_uv for f in feats], Ts, n)
+        np.testing.assert_array_equal(a[2], kin)
+        assert kin.sum() > 0.3 * sc.points_used(n).sum()        # most points are seen
+        assert np.abs(a[0] - K1).sum() / sc.points_used(n).sum() < 0.1
+        # The lens matters: an ideal pinhole with the same K sees the points elsewhere.
+        assert not np.array_equal(sums_numba(scene, Ts, n)[2], a[2])
+
+    def test_paper_chamfer_projects_through_the_lens(self, scene_and_feats, lens):
+        scene, feats, T = scene_and_feats
+        cam = _lens_cameras(feats[0].camera.K)[lens]
+        sc = _with_cameras(scene, cam)
+        n = np.array([50])
+        got = paper_chamfer(sc, [f.image.edge_uv for f in feats], T[None], n)[0]
+        expect = []
+        for f in range(sc.n_frames):
+            p = sc.frame_xyz(f)[:50].astype(np.float64)
+            uv, valid = cam.project_camera_points(p @ T[:3, :3].T + T[:3, 3])
+            d = np.linalg.norm(feats[f].image.edge_uv[:, None] - uv[valid][None], axis=2)
+            expect.append((d.min(axis=1) ** 2).sum() / 50)
+        assert got == pytest.approx(np.mean(expect), rel=1e-9)
 
 
 class TestCombine:
@@ -108,17 +166,18 @@ class TestPaperChamfer:
     def test_matches_brute_force(self, rng):
         from types import SimpleNamespace
 
+        from paretocal.camera import Camera
+
         pts = rng.uniform(-1, 1, (30, 3)) + [0, 0, 5]
+        K = np.array([[50.0, 0, 50], [0, 50, 50], [0, 0, 1]])
         scene = SimpleNamespace(x=pts[:, 0].astype(np.float32), y=pts[:, 1].astype(np.float32),
                                 z=pts[:, 2].astype(np.float32), point_start=np.array([0, 30]),
-                                z_min=0.1)
+                                z_min=0.1, cameras=[Camera(K, 100, 100)])
         edges = rng.uniform(0, 100, (40, 2))
-        A = np.zeros((1, 1, 3, 4))
-        A[0, 0, :, :3] = [[50, 0, 50], [0, 50, 50], [0, 0, 1]]
         n = np.array([12])
-        got = paper_chamfer(scene, [edges], A, n)[0]
+        got = paper_chamfer(scene, [edges], np.eye(4)[None], n)[0]
         p = pts[:12].astype(np.float32).astype(np.float64)
-        uv = (p @ A[0, 0, :, :3].T)[:, :2] / p[:, 2:3]
+        uv = (p @ K.T)[:, :2] / p[:, 2:3]
         d2 = ((edges[:, None, :] - uv[None]) ** 2).sum(-1).min(axis=1)
         assert got == pytest.approx(d2.sum() / 12, rel=1e-9)
 

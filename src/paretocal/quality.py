@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera import Camera
 from .geometry import correction_matrix
 from .search.polish import DEFAULT_FD_STEP, _fd_stencil
 
@@ -161,9 +160,9 @@ def displacement_px(objective, x: np.ndarray, y: np.ndarray) -> float:
 
     sc = objective.scene
     T = objective.transforms(np.vstack([x, y]))
-    cams = [Camera(sc.K[f], int(sc.width[f]), int(sc.height[f])) for f in range(sc.n_frames)]
     return float(reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in
-                                                      range(sc.n_frames)], cams, sc.z_min)[0])
+                                                      range(sc.n_frames)], sc.cameras,
+                                        sc.z_min)[0])
 
 
 def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:

@@ -28,6 +28,9 @@ class ImageFeatures:
         to points that leave the image or fall behind the camera.
     edge_uv : ndarray, shape (E, 2), float64
         ``(u, v)`` of the edge pixels, for exact KD-tree oracles and the paper's Chamfer.
+    mask : ndarray, shape (H, W), bool, or None
+        Usable pixels (None: all). ``mean_dt`` is taken over them, and the objective treats a
+        point landing on another pixel like a point outside the image.
     """
 
     edges: np.ndarray
@@ -35,6 +38,7 @@ class ImageFeatures:
     truncation_px: float
     mean_dt: float
     edge_uv: np.ndarray
+    mask: np.ndarray | None = None
 
 
 def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
@@ -75,16 +79,38 @@ def distance_transform(edges: np.ndarray, truncation_px: float) -> np.ndarray:
     return np.minimum(dt, np.float32(truncation_px)).astype(np.float32)
 
 
+def drop_masked_edges(edges: np.ndarray, mask: np.ndarray, blur_sigma: float) -> np.ndarray:
+    """``edges`` (H, W) without the edge pixels on masked pixels (``mask`` False) or close
+    enough to one for its intensity to have reached them: the blur's radius (OpenCV truncates
+    the kernel at 3 sigma), the Sobel aperture and non-maximum suppression's neighbour. The
+    border of a bonnet or a black frame is an image edge that no LiDAR point should match."""
+    reach = int(np.ceil(3 * max(blur_sigma, 0.0))) + 2
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    near = cv2.dilate((~np.asarray(mask, dtype=bool)).astype(np.uint8), kernel) > 0
+    out = edges.copy()
+    out[near] = 0
+    return out
+
+
 def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
                    canny_high: float = 150.0, truncation_px: float = 10.0,
-                   min_edge_px: int = 0) -> ImageFeatures:
-    """Edge map, truncated distance transform and edge pixel list of one image."""
+                   min_edge_px: int = 0, mask: np.ndarray | None = None) -> ImageFeatures:
+    """Edge map, truncated distance transform and edge pixel list of one image.
+
+    ``mask`` (H, W) bool, True on usable pixels: edges on or near masked pixels are dropped
+    before the distance transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over
+    the usable pixels.
+    """
     edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px)
+    if mask is not None:
+        edges = drop_masked_edges(edges, mask, blur_sigma)
     v, u = np.nonzero(edges)
     edge_uv = np.column_stack([u, v]).astype(np.float64)
     if len(edge_uv) == 0:
         dt = np.full(edges.shape, np.float32(truncation_px))
     else:
         dt = distance_transform(edges, truncation_px)
+    usable = dt if mask is None else dt[np.asarray(mask, dtype=bool)]
+    mean_dt = float(usable.mean(dtype=np.float64)) if usable.size else float(truncation_px)
     return ImageFeatures(edges=edges, dt=dt, truncation_px=float(truncation_px),
-                         mean_dt=float(dt.mean(dtype=np.float64)), edge_uv=edge_uv)
+                         mean_dt=mean_dt, edge_uv=edge_uv, mask=mask)

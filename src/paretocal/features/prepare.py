@@ -129,7 +129,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     :func:`frame_rings`) saves recovering them again.
     """
     img = image_features(frame.image, features.blur_sigma, features.canny_low,
-                         features.canny_high, objective.truncation_px, features.min_edge_px)
+                         features.canny_high, objective.truncation_px, features.min_edge_px,
+                         mask=frame.mask)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.

@@ -82,22 +82,22 @@ def measure_cost_model(scene: Scene, evaluator, T_probe: np.ndarray, n_min: int,
     ----------
     scene : Scene
     evaluator : callable
-        ``evaluator(scene, A, n) -> (S1, S2, n_in)`` as in :mod:`paretocal.objective.kernel`.
+        ``evaluator(scene, T, n) -> (S1, S2, n_in)`` as in :mod:`paretocal.objective.kernel`.
     T_probe : ndarray, shape (4, 4)
         Extrinsic used for the probe population (the initial guess: realistic visibility).
     n_min, n_max : int
         The search's range of points per frame.
     """
-    A = scene.projections(np.repeat(np.asarray(T_probe, dtype=np.float64)[None], candidates, 0))
+    T = np.repeat(np.asarray(T_probe, dtype=np.float64)[None], candidates, 0)
     ns = np.unique(np.linspace(n_min, n_max, 5).round().astype(np.int64))
-    evaluator(scene, A, np.full(candidates, ns[-1]))          # warm-up (and JIT compile)
+    evaluator(scene, T, np.full(candidates, ns[-1]))          # warm-up (and JIT compile)
     pts, ms = [], []
     for n in ns:
         nn = np.full(candidates, n)
         samples = []
         for _ in range(repeats):
             t0 = time.perf_counter()
-            evaluator(scene, A, nn)
+            evaluator(scene, T, nn)
             samples.append(time.perf_counter() - t0)
         pts.append(int(scene.points_used(n)))
         ms.append(1e3 * float(np.median(samples)) / candidates)

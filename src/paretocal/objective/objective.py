@@ -54,14 +54,14 @@ class CalibrationObjective:
         """
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         n = np.rint(X[:, 6]).astype(np.int64)
-        A = self.scene.projections(self.transforms(X))
+        T = self.transforms(X)
         self.evaluations += len(X)
-        S1, S2, n_in = self.sums(self.scene, A, n)
+        S1, S2, n_in = self.sums(self.scene, T, n)
         W1, W2 = self.scene.group_weights(n)
         out = combine(S1, S2, W1, W2, self.scene.outside, self.weights, self.ucb_k)
         out["in_view"] = n_in.sum(axis=1) / np.maximum(self.scene.points_used(n), 1)
         if self.settings.chamfer == "paper":
-            out["f1"] = paper_chamfer(self.scene, self.edge_uv, A, n)
+            out["f1"] = paper_chamfer(self.scene, self.edge_uv, T, n)
         return out
 
     def cost(self, X: np.ndarray) -> dict[str, np.ndarray]:
@@ -71,10 +71,10 @@ class CalibrationObjective:
         pts = self.scene.points_used(n)
         cm = self.cost_model
         if self.settings.cost == "psutil":
-            A = self.scene.projections(self.transforms(X))
+            T = self.transforms(X)
 
             def one(i):
-                self.sums(self.scene, A[i:i + 1], n[i:i + 1])
+                self.sums(self.scene, T[i:i + 1], n[i:i + 1])
 
             ms, nbytes = measure_per_candidate(one, len(X))
             t = ms / self._psutil_reference_ms()
@@ -88,9 +88,9 @@ class CalibrationObjective:
         """Measured time of one candidate evaluated alone at the largest n (median of 5)."""
         if getattr(self, "_ref_ms", None) is None:
             n_max = int(self.scene.points_per_frame.max())
-            A = self.scene.projections(self.T_init[None])
             ms, _ = measure_per_candidate(
-                lambda i: self.sums(self.scene, A, np.array([n_max])), 5, repeats=3)
+                lambda i: self.sums(self.scene, self.T_init[None], np.array([n_max])), 5,
+                repeats=3)
             self._ref_ms = float(np.median(ms))
         return self._ref_ms
 

@@ -19,7 +19,7 @@ from .scene import Scene
 NO_POINT_COST = 1e12  # no point in front of the camera: nothing to measure against
 
 
-def paper_chamfer(scene: Scene, edge_uv: list[np.ndarray], A: np.ndarray,
+def paper_chamfer(scene: Scene, edge_uv: list[np.ndarray], T: np.ndarray,
                   n: np.ndarray) -> np.ndarray:
     """The paper's Chamfer per candidate, mean over frames, shape (C,).
 
@@ -28,25 +28,26 @@ def paper_chamfer(scene: Scene, edge_uv: list[np.ndarray], A: np.ndarray,
     scene : Scene
     edge_uv : list of ndarray, shape (E_f, 2)
         Image edge pixels per frame.
-    A : ndarray, shape (C, F, 3, 4)
-        Projection matrices per candidate and frame.
+    T : ndarray, shape (C, 4, 4) or (C, 3, 4)
+        Candidate extrinsics; points are projected through each frame's camera model and
+        those valid for it (in front of a pinhole, inside the lens's monotonic radius) count.
     n : ndarray, shape (C,)
         Points per frame.
     """
-    A = np.asarray(A, dtype=np.float64)
-    C, F = A.shape[:2]
+    T = np.asarray(T, dtype=np.float64)
+    C, F = len(T), len(scene.point_start) - 1
     out = np.zeros((C, F))
     for f in range(F):
         a, b = scene.point_start[f], scene.point_start[f + 1]
         P = np.column_stack([scene.x[a:b], scene.y[a:b], scene.z[a:b]]).astype(np.float64)
+        cam = scene.cameras[f]
         for c in range(C):
             m = min(int(n[c]), b - a)
-            H = P[:m] @ A[c, f, :, :3].T + A[c, f, :, 3]
-            front = H[:, 2] > scene.z_min
-            if not front.any() or len(edge_uv[f]) == 0:
+            uv, valid = cam.project_camera_points(P[:m] @ T[c, :3, :3].T + T[c, :3, 3],
+                                                  scene.z_min)
+            if not valid.any() or len(edge_uv[f]) == 0:
                 out[c, f] = NO_POINT_COST
                 continue
-            uv = H[front, :2] / H[front, 2:3]
-            d, _ = cKDTree(uv).query(edge_uv[f])
+            d, _ = cKDTree(uv[valid]).query(edge_uv[f])
             out[c, f] = float(np.sum(d * d)) / max(m, 1)
     return out.mean(axis=1)

@@ -1,7 +1,9 @@
 """The frames' features laid out as flat arrays for the evaluators.
 
 Points are stored per coordinate as contiguous float32 arrays (frame after frame, each in its
-evaluation order), distance transforms as one flat float32 buffer; per-frame offsets index both.
+evaluation order), distance transforms as one flat uint16 buffer; per-frame offsets index both.
+Each frame's camera is kept whole (for the numpy evaluators) and as one row of parameters (for
+the numba kernel).
 """
 
 from __future__ import annotations
@@ -10,10 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..camera import N_PARAMS
 from ..features.lidar import GROUP_NAMES
 from ..features.prepare import FrameFeatures
 
 N_GROUPS = len(GROUP_NAMES)
+#: Quantised DT value of a masked pixel; real distances use 0 .. DT_MASKED - 1.
+DT_MASKED = 65535
 
 
 @dataclass(eq=False)
@@ -31,13 +36,22 @@ class Scene:
         Frame f owns points ``point_start[f]:point_start[f + 1]``.
     dtq : ndarray, shape (sum H*W,), uint16
         Truncated distance transforms, row-major, frame after frame, in units of ``dt_scale``
-        (truncation / 65535 px): the evaluators read half the bytes of float32.
+        (truncation / 65534 px): the evaluators read half the bytes of float32. Masked pixels
+        (``Frame.mask`` False) hold :data:`DT_MASKED`; a lookup that reads one counts as out
+        of the image.
     dt_scale : float
     dt_start : ndarray, shape (F,), int64
     width, height : ndarray, shape (F,), int64
     outside : ndarray, shape (F,), float32
-        Cost charged to a point that is behind the camera or outside the image.
+        Cost charged to a point that is not valid for the camera model, outside the image or
+        on a masked pixel.
     K : ndarray, shape (F, 3, 3), float64
+    has_mask : ndarray, shape (F,), bool
+        Whether frame f has masked pixels (the kernel checks lookups only where it does).
+    cameras : list of Camera
+        Each frame's camera (the numpy evaluators project through it).
+    cam_params : ndarray, shape (F, N_PARAMS), float64
+        The same cameras as :meth:`Camera.kernel_params` rows, for the numba kernel.
     group_prefix : ndarray, shape (F, max_points + 1, G, 2), float64
         ``group_prefix[f, k, g]`` = sum of the weights and of the squared weights of group g
         among the first k points of frame f (both equal the count when weights are 1).
@@ -63,6 +77,9 @@ class Scene:
     z_min: float
     truncation_px: float
     names: list[str]
+    cameras: list
+    cam_params: np.ndarray
+    has_mask: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -86,14 +103,19 @@ class Scene:
         pref = self.group_prefix[np.arange(self.n_frames)[None, :], m]
         return pref[..., 0], pref[..., 1]
 
-    def projections(self, T: np.ndarray) -> np.ndarray:
-        """``K_f @ T_c[:3]`` for transforms (C, 4, 4): float64 (C, F, 3, 4)."""
-        return np.einsum("fij,cjk->cfik", self.K, np.asarray(T, dtype=np.float64)[:, :3, :])
+    def _frame_q(self, f: int) -> np.ndarray:
+        h, w, s = int(self.height[f]), int(self.width[f]), int(self.dt_start[f])
+        return self.dtq[s:s + h * w].reshape(h, w)
 
     def frame_dt(self, f: int) -> np.ndarray:
-        """The distance transform of frame f as the evaluators see it, float64 (H, W) in px."""
-        h, w, s = int(self.height[f]), int(self.width[f]), int(self.dt_start[f])
-        return self.dtq[s:s + h * w].reshape(h, w) * self.dt_scale
+        """The distance transform of frame f as the evaluators see it, float64 (H, W) in px;
+        NaN on masked pixels."""
+        q = self._frame_q(f)
+        return np.where(q == DT_MASKED, np.nan, q * self.dt_scale)
+
+    def frame_usable(self, f: int) -> np.ndarray:
+        """Frame f's usable (unmasked) pixels, bool (H, W)."""
+        return self._frame_q(f) != DT_MASKED
 
     def frame_xyz(self, f: int) -> np.ndarray:
         """Frame f's points, shape (M_f, 3) float32."""
@@ -122,8 +144,22 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
     sizes = np.array([f.image.dt.size for f in frames], dtype=np.int64)
     dt_start = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     trunc = frames[0].image.truncation_px
-    out = np.array([f.image.mean_dt if outside == "mean" else trunc for f in frames],
-                   dtype=np.float32)
+    masks = [getattr(f.image, "mask", None) for f in frames]
+    out = np.array([_mean_dt(f.image, m) if outside == "mean" else trunc
+                    for f, m in zip(frames, masks)], dtype=np.float32)
+    scale = trunc / (DT_MASKED - 1)
+    dtq = []
+    for f, m in zip(frames, masks):
+        q = np.rint(f.image.dt.astype(np.float64).ravel() / scale).clip(0, DT_MASKED - 1)
+        q = q.astype(np.uint16)
+        if m is not None:
+            q[~np.asarray(m, dtype=bool).ravel()] = DT_MASKED
+        dtq.append(q)
+    cameras = [f.camera for f in frames]
+    for cam, f in zip(cameras, frames):
+        if (cam.height, cam.width) != f.image.dt.shape:
+            raise ValueError(f"frame {f.name}: the camera is {cam.width}x{cam.height} but the "
+                             f"distance transform {f.image.dt.shape[1]}x{f.image.dt.shape[0]}")
     weight = (np.concatenate([f.weight for f in frames]) if counts.sum()
               else np.zeros(0)).astype(np.float32)
     maxm = int(counts.max()) if len(counts) else 0
@@ -139,11 +175,23 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
         y=np.ascontiguousarray(xyz[:, 1], dtype=np.float32),
         z=np.ascontiguousarray(xyz[:, 2], dtype=np.float32),
         weight=weight, group=group, point_start=point_start,
-        dtq=np.rint(np.concatenate([f.image.dt.ravel() for f in frames]).astype(np.float64)
-                    / (trunc / 65535.0)).clip(0, 65535).astype(np.uint16),
-        dt_scale=trunc / 65535.0, dt_start=dt_start,
+        dtq=np.concatenate(dtq) if dtq else np.zeros(0, np.uint16),
+        dt_scale=scale, dt_start=dt_start,
         width=np.array([f.image.dt.shape[1] for f in frames], dtype=np.int64),
         height=np.array([f.image.dt.shape[0] for f in frames], dtype=np.int64),
         outside=out, K=np.stack([np.asarray(f.camera.K, dtype=np.float64) for f in frames]),
         group_prefix=prefix, z_min=float(z_min), truncation_px=float(trunc),
-        names=[f.name for f in frames])
+        names=[f.name for f in frames], cameras=cameras,
+        has_mask=np.array([m is not None and not np.all(m) for m in masks], dtype=bool),
+        cam_params=np.ascontiguousarray(np.stack([c.kernel_params() for c in cameras]))
+        if cameras else np.zeros((0, N_PARAMS)))
+
+
+def _mean_dt(image, mask) -> float:
+    """Mean truncated DT over the usable pixels (the whole image without a mask)."""
+    if mask is None:
+        return float(image.mean_dt)
+    usable = np.asarray(mask, dtype=bool)
+    if not usable.any():
+        return float(image.truncation_px)
+    return float(image.dt[usable].mean(dtype=np.float64))
