@@ -263,11 +263,36 @@ def test_image_size_disagrees_with_calib_yaml(capfd, tmp_path, rig, raw_frames):
     (lambda c: c.update(T_cam_lidar=np.eye(3).tolist()),
      "T_cam_lidar must be 4x4 (or 3x4), got shape (3, 3)"),
     (lambda c: c.update(camera="pinhole"), "missing 'camera' section"),
+    (lambda c: c["camera"].update(model="mei", D=[0.03, -0.08, 0.0, 0.0, 0.0]),
+     "camera.xi is missing: the mei (unified) model needs the mirror parameter xi"),
+    (lambda c: c["camera"].update(model="unified", xi=-0.5),
+     "camera.xi must be a finite number >= 0, got -0.5"),
+    (lambda c: c["camera"].update(model="omni", xi=float("nan")),
+     "camera.xi must be a finite number >= 0"),
+    (lambda c: c["camera"].update(model="mei", xi=1.0, D=[0.1, 0.2, 0.3]),
+     "camera.D must hold the Mei model's k1, k2, p1, p2 [, k3], got 3"),
+    (lambda c: c["camera"].update(D=[0.0] * 13 + [0.01]),
+     "the tilted-sensor coefficients (the last two of 14) are not supported"),
+    (lambda c: c["camera"].update(mask="masks/none.png"), "camera.mask file"),
+    (lambda c: c["camera"].update(mask=3), "camera.mask must be the path of a mask image"),
+    (lambda c: c["camera"].update(K=[[700, 0, 600], [5, 700, 180], [0, 0, 1]]),
+     "camera.K must be upper triangular (its second row starts with 0)"),
 ])
 def test_malformed_calib_yaml(capfd, tmp_path, rig, edit, expect):
     _edit_calib(rig, edit)
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
         expect=(str(rig / "calib.yaml"), expect))
+
+
+@pytest.mark.parametrize("shape, expect", [
+    ((100, 1242), "mask is 1242x100 but the calibration says 1242x375"),
+    ((375, 1242), "the mask has no usable (nonzero) pixel"),
+])
+def test_bad_mask_file(capfd, tmp_path, rig, shape, expect):
+    cv2.imwrite(str(rig / "mask.png"), np.zeros(shape, np.uint8))
+    _edit_calib(rig, lambda c: c["camera"].update(mask="mask.png"))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(rig / "mask.png"), expect))
 
 
 @pytest.mark.parametrize("text, expect", [

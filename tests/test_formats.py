@@ -15,7 +15,7 @@ import yaml
 from pypcd4 import Encoding, PointCloud
 from scipy.spatial.transform import Rotation
 
-from paretocal.camera import project
+from paretocal.camera import Camera, project
 from paretocal.errors import InputError
 from paretocal.geometry import apply_correction, invert
 from paretocal.io import detect_source, load_frames, read_extrinsic
@@ -387,22 +387,26 @@ class TestFisheye:
                                                          "T_cam_lidar": T.tolist()}))
         return root, uv_fisheye, img
 
-    @pytest.mark.parametrize("model", ["fisheye", "equidistant"])
-    def test_undistorted_dots_land_on_the_pinhole_projection(self, tmp_path, rng, model):
+    @pytest.mark.parametrize("model", ["fisheye", "equidistant", "kannala_brandt"])
+    def test_dots_land_on_the_fisheye_projection(self, tmp_path, rng, model):
         root, uv_fisheye, raw = self.folder(tmp_path, rng, {"model": model, "D": self.D})
         (frame,) = load_frames(root)
         np.testing.assert_array_equal(frame.camera.K, self.K)
+        assert frame.camera.model == "fisheye" and frame.camera.D == tuple(self.D)
+        np.testing.assert_array_equal(frame.image, cv2.imread(str(root / "images" /
+                                                                  "000000.png")))  # as taken
         uv, _, visible = project(frame.points, frame.camera, frame.T_ref)
         assert visible.all()
-        # The distorted dots are far from where a pinhole camera puts them...
-        assert np.abs(uv_fisheye - uv).max() > 20
-        # ... and the loaded (undistorted) image has them where it does, within a pixel.
+        # The camera's projection is OpenCV's fisheye one...
+        np.testing.assert_allclose(uv, uv_fisheye, atol=1e-6)
+        # ... and the dots the lens drew in the image lie there, within a pixel.
         found = _blob_centroids(frame.image[:, :, 0])
         assert len(found) == len(uv)
         d = np.linalg.norm(found[:, None] - uv[None], axis=2).min(axis=0)
         assert d.max() < 1.0, d
-        # Read as a pinhole image without distortion, the dots stay where the lens put them.
-        assert np.linalg.norm(_blob_centroids(raw)[:, None] - uv[None], axis=2).min(0).max() > 20
+        # A pinhole camera with the same K would put them far away.
+        pin = project(frame.points, Camera(self.K, self.W, self.H), frame.T_ref)[0]
+        assert np.abs(pin - uv).max() > 20
 
     def test_fisheye_needs_four_coefficients(self, tmp_path, rng):
         root, _, _ = self.folder(tmp_path, rng, {"model": "fisheye", "D": self.D + [0.0]})
@@ -455,24 +459,24 @@ class TestCameraInfo:
         for other in (b, c):
             np.testing.assert_array_equal(other.camera.K, a.camera.K)
             assert (other.camera.width, other.camera.height) == (a.camera.width, a.camera.height)
-            np.testing.assert_array_equal(other.dist, a.dist)
-            assert other.dist_model == a.dist_model == "pinhole"
+            assert other.camera.D == a.camera.D == tuple(self.D)
+            assert other.camera.model == a.camera.model == "pinhole"
         images = [load_frames(r)[0].image for r in (plain, by_file, inline)]
         np.testing.assert_array_equal(images[1], images[0])
         np.testing.assert_array_equal(images[2], images[0])
-        assert not np.array_equal(images[0], f[0].image)          # it was undistorted
+        np.testing.assert_array_equal(images[0], f[0].image)      # used as taken
 
     def test_equidistant_and_rational_polynomial(self, tmp_path, raw_frames):
         f = raw_frames[:1]
         root = generic_folder(tmp_path / "eq", f, write_points_bin,
                               camera=camera_info(f[0], [0.1, 0.01, 0, 0], "equidistant"))
         fr = detect_source(root).frames[0]
-        assert fr.dist_model == "fisheye" and fr.dist.tolist() == [0.1, 0.01, 0, 0]
+        assert fr.camera.model == "fisheye" and fr.camera.D == (0.1, 0.01, 0, 0)
         root = generic_folder(tmp_path / "rp", f, write_points_bin,
                               camera=camera_info(f[0], [0.1, 0.01, 0, 0, 0, 0.2, 0, 0],
                                                  "rational_polynomial"))
         fr = detect_source(root).frames[0]
-        assert fr.dist_model == "pinhole" and fr.dist.size == 8
+        assert fr.camera.model == "pinhole" and len(fr.camera.D) == 8
 
     @pytest.mark.parametrize("edit, what", [
         (lambda c: c["camera_matrix"].update(data=[1.0] * 8), r"camera_matrix\.data has 8 values"),

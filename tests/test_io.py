@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+from paretocal.camera import project
 from paretocal.errors import InputError, SettingsError
 from paretocal.io import detect_source, load_frames, read_extrinsic, select_frames, write_extrinsic
 from paretocal.io.readers import read_points
@@ -61,13 +62,23 @@ class TestGenericFolder:
         fr = load_frames(root)
         assert fr[0].points.shape[1] == 4 and not fr[0].points[:, 3].any()
 
-    def test_distortion_undistorts_images(self, tmp_path, raw_frames):
+    def test_distortion_is_kept_in_the_camera_not_undone_in_the_image(self, tmp_path,
+                                                                      raw_frames):
         D = [-0.3, 0.1, 0.001, 0.0005, 0.0]
         root = write_generic(tmp_path / "rig", raw_frames[:1], D=D)
         fr = load_frames(root)
-        expect = cv2.undistort(raw_frames[0].image, raw_frames[0].camera.K, np.array(D))
-        np.testing.assert_array_equal(fr[0].image, expect)
-        assert not np.array_equal(fr[0].image, raw_frames[0].image)
+        np.testing.assert_array_equal(fr[0].image, raw_frames[0].image)   # as stored
+        cam = fr[0].camera
+        assert cam.model == "pinhole" and cam.D == tuple(D) and not cam.ideal
+        np.testing.assert_array_equal(cam.K, raw_frames[0].camera.K)
+        # Projection goes through the lens model: OpenCV's projectPoints.
+        p = raw_frames[0].points[:5000, :3].astype(np.float64)
+        uv, _, vis = project(p, cam, fr[0].T_ref)
+        T = fr[0].T_ref
+        expect, _ = cv2.projectPoints(p[vis], cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], cam.K,
+                                      np.array(D))
+        assert vis.sum() > 500
+        np.testing.assert_allclose(uv[vis], expect[:, 0], atol=1e-6)
 
     def test_image_size_mismatch(self, tmp_path, raw_frames):
         root = write_generic(tmp_path / "rig", raw_frames[:1])

@@ -1,9 +1,10 @@
 """Sparse depth maps from a LiDAR sweep and an extrinsic (the paper's "Depth Map Generation").
 
-The depth of a pixel is the camera-frame ``z`` (metres) of the LiDAR return projecting into it;
-where several returns land on one pixel the nearest wins (a z-buffer), and pixels without a
-return hold 0. Files follow the KITTI depth benchmark: 16-bit PNG holding ``round(z * 256)``
-(0 = no return, so the largest representable depth is 255.996 m).
+The depth of a pixel is the camera-frame ``z`` (metres) of the LiDAR return projecting into it
+through the camera's lens model, in the image as it was taken; where several returns land on
+one pixel the nearest wins (a z-buffer), and pixels without a return, or masked (the frame's
+``mask``: the ego vehicle, borders), hold 0. Files follow the KITTI depth benchmark: 16-bit PNG
+holding ``round(z * 256)`` (0 = no return, so the largest representable depth is 255.996 m).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ KITTI_DEPTH_SCALE = 256.0
 
 
 def depth_map(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
-              z_min: float = 0.1) -> np.ndarray:
+              z_min: float = 0.1, mask: np.ndarray | None = None) -> np.ndarray:
     """The sparse depth image of one sweep.
 
     Parameters
@@ -31,7 +32,10 @@ def depth_map(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
     camera : Camera
     T_cam_lidar : ndarray, shape (4, 4)
     z_min : float
-        Returns closer than this in front of the camera are ignored (metres).
+        Returns closer than this in front of the camera are ignored (metres); so are returns
+        a wide-angle model sees behind the image plane (no positive depth).
+    mask : ndarray, shape (height, width), bool, optional
+        Usable pixels; returns landing on other pixels are dropped.
 
     Returns
     -------
@@ -40,11 +44,15 @@ def depth_map(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
         belongs to the pixel whose centre is nearest to its projection.
     """
     uv, z, vis = project(np.asarray(points)[:, :3], camera, T_cam_lidar, z_min)
+    vis &= z > z_min
     u = np.rint(uv[vis, 0]).astype(np.int64)
     v = np.rint(uv[vis, 1]).astype(np.int64)
     z = z[vis]
     ok = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
     u, v, z = u[ok], v[ok], z[ok]
+    if mask is not None:
+        keep = np.asarray(mask, dtype=bool)[v, u]
+        u, v, z = u[keep], v[keep], z[keep]
     depth = np.full(camera.height * camera.width, np.inf)
     np.minimum.at(depth, v * camera.width + u, z)
     depth[~np.isfinite(depth)] = 0.0
@@ -91,7 +99,7 @@ def write_depth(frame, T_cam_lidar: np.ndarray, out_dir: str | Path, z_min: floa
     ``<stem>_overlay.png`` for one frame into ``out_dir``; returns the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    d = depth_map(frame.points, frame.camera, T_cam_lidar, z_min)
+    d = depth_map(frame.points, frame.camera, T_cam_lidar, z_min, getattr(frame, "mask", None))
     paths = [out / f"{frame.name}.png", out / f"{frame.name}.npy",
              out / f"{frame.name}_overlay.png"]
     for path, img in ((paths[0], to_kitti_png(d)),

@@ -19,11 +19,12 @@ class Frame:
     name : str
         The frame's stem (file name without extension), unique within a source.
     image : ndarray, shape (H, W, 3), uint8
-        Undistorted colour image, BGR channel order (OpenCV's).
+        Colour image as taken (not undistorted), BGR channel order (OpenCV's).
     points : ndarray, shape (N, 4), float32
         LiDAR points ``x, y, z`` in metres in the LiDAR frame and intensity (reflectance).
     camera : Camera
-        Intrinsics of ``image``.
+        Intrinsics of ``image`` with its lens model (pinhole with distortion, fisheye, Mei):
+        everything projects through it.
     T_ref : ndarray, shape (4, 4), or None
         The dataset's own ``T_cam_lidar`` when it has one (the reference for evaluation).
     image_path, points_path : Path
@@ -46,7 +47,9 @@ class Frame:
         or the pose is unknown (see :mod:`paretocal.features.rings`).
     mask : ndarray, shape (H, W), bool, or None
         Pixels that show the scene (True); False on the ego vehicle, black borders or lens
-        areas the calibration must ignore. None: every pixel.
+        areas the calibration must ignore (calib.yaml's ``camera.mask``, and the pixels the
+        lens model cannot reach). A LiDAR point landing on a masked pixel counts as out of the
+        image. None: every pixel.
     """
 
     name: str

@@ -9,18 +9,17 @@ from __future__ import annotations
 import logging
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from ..camera import Camera
 from ..errors import InputError, SettingsError
 from ..geometry import check_rigid
 from .frame import Frame
-from .readers import (IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image, read_image,
-                      read_kitti_calib, read_mapping, read_points)
+from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
+                      read_cloud, read_image, read_kitti_calib, read_mapping)
 
 log = logging.getLogger(__name__)
 
@@ -32,28 +31,52 @@ class FrameFiles:
     name: str
     image_path: Path
     points_path: Path
-    camera: Camera
+    camera: Camera  # the full lens model of the image as stored (images are not undistorted)
     T_ref: np.ndarray | None
-    dist: np.ndarray | None = None  # distortion of the raw image, if any (see dist_model)
-    #: "pinhole": ``dist`` holds OpenCV's k1, k2, p1, p2[, k3, ...] (cv2.undistort);
-    #: "fisheye": ``dist`` holds the equidistant k1..k4 (cv2.fisheye).
-    dist_model: str = "pinhole"
+    #: Usable pixels from the calib.yaml mask file, (H, W) bool, or None (every pixel).
+    mask: np.ndarray | None = None
     #: KITTI sources only: ``[I | b] @ R_rect_00`` (4x4), so that ``T_ref = kitti_rect @ Tr``.
     kitti_rect: np.ndarray | None = None
+    #: The LiDAR's pose in the cloud's frame (calib.yaml ``lidar_pose``), or None.
+    sensor_pose: np.ndarray | None = None
+    #: Declared ``.bin`` column layout (calib.yaml ``points: {layout: NAME}``), or None.
+    bin_layout: str | None = None
 
 
 @dataclass
 class Source:
-    """A detected dataset: its layout name and its frames in stem order."""
+    """A detected dataset: its layout name, its frames in stem order, and settings the dataset
+    states about itself (``options``: ``init_error`` as (deg, m) from calib.yaml)."""
 
     layout: str
     root: Path
     frames: list[FrameFiles]
+    options: dict = field(default_factory=dict)
+
+
+def _link_file(path: Path) -> Path:
+    """``path``, or the folder a *link file* at ``path`` names.
+
+    A symbolic link copied by a tool that does not keep links (git with ``core.symlinks``
+    off, some archivers) becomes a small text file holding the link's target. A folder entry
+    that is such a file, naming an existing folder relative to its own, is followed (with a
+    note in the log) instead of failing with "folder not found".
+    """
+    if path.is_file() and path.stat().st_size < 4096:
+        try:
+            target = path.read_text(encoding="utf-8").strip()
+        except (OSError, UnicodeDecodeError):
+            return path
+        if target and "\n" not in target and (path.parent / target).is_dir():
+            log.info("%s: a link file naming %s; following it", path, target)
+            return (path.parent / target).resolve()
+    return path
 
 
 def _pair(root: Path, image_dir: Path, points_dir: Path,
           image_suffixes=IMAGE_SUFFIXES, point_suffixes=POINT_SUFFIXES) -> list[tuple[str, Path, Path]]:
     """Pair images and point clouds by stem; fail if the folders share no stem."""
+    image_dir, points_dir = _link_file(image_dir), _link_file(points_dir)
     if not image_dir.is_dir():
         raise InputError(f"{image_dir}: image folder not found")
     if not points_dir.is_dir():
@@ -148,19 +171,19 @@ def _image_shape(path: Path) -> tuple[int, int]:
     return decode_image(path).shape[:2]
 
 
-#: Distortion model names of calib.yaml (``camera.model``) and of ROS camera_info
-#: (``distortion_model``), mapped to how the image is undistorted.
-_DIST_MODELS = {"pinhole": "pinhole", "plumb_bob": "pinhole", "rational_polynomial": "pinhole",
-                "radtan": "pinhole", "fisheye": "fisheye", "equidistant": "fisheye"}
+#: Camera model names of calib.yaml (``camera.model``) and of ROS camera_info
+#: (``distortion_model``), mapped to the :class:`~paretocal.camera.Camera` model.
+_MODELS = {"pinhole": "pinhole", "radtan": "pinhole", "plumb_bob": "pinhole",
+           "rational_polynomial": "pinhole", "fisheye": "fisheye", "equidistant": "fisheye",
+           "kannala_brandt": "fisheye", "mei": "mei", "omni": "mei", "unified": "mei"}
 _OPENCV_D_SIZES = (4, 5, 8, 12, 14)
 
 
-def _intrinsics(path: Path, where: dict[str, str], K, width, height, D,
-                model) -> tuple[Camera, np.ndarray | None, str]:
+def _intrinsics(path: Path, where: dict[str, str], K, width, height, D, model,
+                xi=None) -> Camera:
     """Validate intrinsics read from ``path``; ``where`` maps a role to the key that held it.
 
-    Returns the pinhole camera of the undistorted images, the distortion (None when there is
-    nothing to undo) and the distortion model ("pinhole" or "fisheye").
+    Returns the camera with its full lens model: the images are used as they are.
     """
     K = _numbers(path, where["K"], K)
     width, height = (_size(path, where[k], v) for k, v in (("width", width), ("height", height)))
@@ -172,26 +195,45 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D,
     if not np.allclose(K[2], [0, 0, 1]) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError(f"{path}: {where['K']} must have positive focal lengths and last row "
                          "[0, 0, 1]")
+    if K[1, 0] != 0:
+        raise InputError(f"{path}: {where['K']} must be upper triangular (its second row "
+                         "starts with 0)")
     key = str(model).strip().lower() if model is not None else "pinhole"
-    if key not in _DIST_MODELS:
+    if key not in _MODELS:
         raise InputError(f"{path}: {where['model']} {model!r} is not one of "
-                         f"{', '.join(_DIST_MODELS)}")
-    kind = _DIST_MODELS[key]
+                         f"{', '.join(_MODELS)}")
+    kind = _MODELS[key]
     if D is not None and not np.all(np.isfinite(D)):
         raise InputError(f"{path}: {where['D']} contains NaN or infinite values")
     if kind == "fisheye":
-        if D is None:
-            D = np.zeros(4)  # the ideal equidistant lens: still not a pinhole, undistort it
-        if D.size != 4:
+        if D is not None and D.size != 4:
             raise InputError(f"{path}: {where['D']} must hold the 4 fisheye (equidistant) "
                              f"coefficients k1, k2, k3, k4, got {D.size}")
+    elif kind == "mei":
+        if D is not None and D.size not in (4, 5):
+            raise InputError(f"{path}: {where['D']} must hold the Mei model's k1, k2, p1, p2 "
+                             f"[, k3], got {D.size}")
+        if xi is None:
+            raise InputError(f"{path}: {where['xi']} is missing: the {key} (unified) model "
+                             "needs the mirror parameter xi")
+        try:
+            xi_v = float(xi.strip()) if isinstance(xi, str) else xi
+            ok = (not isinstance(xi_v, bool) and isinstance(xi_v, (int, float, np.number))
+                  and math.isfinite(float(xi_v)) and float(xi_v) >= 0)
+        except (ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise InputError(f"{path}: {where['xi']} must be a finite number >= 0, got {xi!r}")
+        xi = float(xi_v)
     elif D is not None:
         if D.size not in _OPENCV_D_SIZES:
             raise InputError(f"{path}: {where['D']} must hold 4, 5, 8, 12 or 14 finite OpenCV "
                              f"coefficients, got {D.size}")
-        if not np.any(D):
-            D = None
-    return Camera(K=K, width=width, height=height), D, kind
+        if D.size == 14 and np.any(D[12:]):
+            raise InputError(f"{path}: {where['D']}: the tilted-sensor coefficients (the last "
+                             "two of 14) are not supported; they must be 0")
+    return Camera(K=K, width=width, height=height, model=kind, D=D,
+                  xi=xi if kind == "mei" else 0.0)
 
 
 def _numbers(path: Path, name: str, value) -> np.ndarray:
@@ -245,12 +287,13 @@ def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np
     return data.reshape(rows, cols)
 
 
-def _camera_info(path: Path, info: dict, prefix: str = "") -> tuple[Camera, np.ndarray | None, str]:
+def _camera_info(path: Path, info: dict, prefix: str = "") -> Camera:
     """Intrinsics from a ROS ``camera_info`` mapping (camera_calibration_parsers' YAML form).
 
-    Uses ``camera_matrix`` and the distortion; ``rectification_matrix`` and
-    ``projection_matrix`` are ignored: images are undistorted into the camera's own frame with
-    the same K, which is the frame ``T_cam_lidar`` refers to.
+    Uses ``camera_matrix`` and the distortion (and ``xi`` for a Mei model, a key ROS itself
+    does not have); ``rectification_matrix`` and ``projection_matrix`` are ignored: points are
+    projected through the lens model into the raw image, in the camera's own frame, which is
+    the frame ``T_cam_lidar`` refers to.
     """
     for key in ("image_width", "image_height", "camera_matrix"):
         if info.get(key) is None:
@@ -266,11 +309,12 @@ def _camera_info(path: Path, info: dict, prefix: str = "") -> tuple[Camera, np.n
         model, D = None, None
     where = {"K": f"{prefix}camera_matrix", "width": f"{prefix}image_width",
              "height": f"{prefix}image_height", "model": f"{prefix}distortion_model",
-             "D": f"{prefix}distortion_coefficients"}
-    return _intrinsics(path, where, K, info["image_width"], info["image_height"], D, model)
+             "D": f"{prefix}distortion_coefficients", "xi": f"{prefix}xi"}
+    return _intrinsics(path, where, K, info["image_width"], info["image_height"], D, model,
+                       info.get("xi"))
 
 
-def _folder_camera(root: Path, cpath: Path, data: dict) -> tuple[Camera, np.ndarray | None, str]:
+def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
     """The camera of a generic folder: ``camera`` in calib.yaml, or a ROS camera_info file."""
     if data.get("camera_info") is not None:
         if data.get("camera") is not None:
@@ -291,21 +335,90 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> tuple[Camera, np.ndar
     for key in ("K", "width", "height"):
         if key not in cam:
             raise InputError(f"{cpath}: missing camera.{key}")
-    where = {k: f"camera.{k}" for k in ("K", "width", "height", "model", "D")}
+    where = {k: f"camera.{k}" for k in ("K", "width", "height", "model", "D", "xi")}
     return _intrinsics(cpath, where, cam["K"], cam["width"], cam["height"], cam.get("D"),
-                       cam.get("model"))
+                       cam.get("model"), cam.get("xi"))
+
+
+def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndarray | None:
+    """The usable pixels named by ``camera.mask`` (or a top-level ``mask``) in calib.yaml.
+
+    The file is an image of the camera's size, nonzero (in any channel) on usable pixels.
+    """
+    cam = data.get("camera")
+    key, ref = "mask", data.get("mask")
+    if isinstance(cam, dict) and cam.get("mask") is not None:
+        if ref is not None:
+            raise InputError(f"{cpath}: give either camera.mask or mask, not both")
+        key, ref = "camera.mask", cam["mask"]
+    if ref is None:
+        return None
+    if not isinstance(ref, str) or not ref.strip():
+        raise InputError(f"{cpath}: {key} must be the path of a mask image (relative to the "
+                         "folder), nonzero on usable pixels")
+    mpath = root / ref
+    if not mpath.is_file():
+        raise InputError(f"{cpath}: {key} file {mpath} not found")
+    img = decode_image(mpath)
+    if img.shape[:2] != (camera.height, camera.width):
+        raise InputError(f"{mpath}: mask is {img.shape[1]}x{img.shape[0]} but the calibration "
+                         f"says {camera.width}x{camera.height}")
+    usable = img != 0 if img.ndim == 2 else np.any(img != 0, axis=2)
+    if not usable.any():
+        raise InputError(f"{mpath}: the mask has no usable (nonzero) pixel")
+    usable.setflags(write=False)
+    return usable
 
 
 def _folder(root: Path) -> Source:
     cpath = root / "calib.yaml"
     data = read_mapping(cpath)
-    camera, dist, model = _folder_camera(root, cpath, data)
+    camera = _folder_camera(root, cpath, data)
+    mask = _folder_mask(root, cpath, data, camera)
     T_ref = None
     if data.get("T_cam_lidar") is not None:
         T_ref = check_rigid(data["T_cam_lidar"], str(cpath))
+    pose = None
+    if data.get("lidar_pose") is not None:
+        pose = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
+    layout = _points_layout(cpath, data.get("points"))
+    options = {}
+    if data.get("init_error") is not None:
+        options["init_error"] = _init_error(cpath, data["init_error"])
     pairs = _pair(root, root / "images", root / "points")
-    return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, dist, model)
-                                   for s, i, p in pairs])
+    return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
+                                              bin_layout=layout) for s, i, p in pairs], options)
+
+
+def _points_layout(cpath: Path, section) -> str | None:
+    """The declared ``.bin`` layout of calib.yaml's ``points: {layout: NAME}`` (or None)."""
+    if section is None:
+        return None
+    if not isinstance(section, dict) or set(section) - {"layout"}:
+        raise InputError(f"{cpath}: points must be a mapping with the key layout (one of "
+                         f"{', '.join(BIN_LAYOUTS)})")
+    name = section.get("layout")
+    if name is None:
+        return None
+    if str(name).lower() not in BIN_LAYOUTS:
+        raise InputError(f"{cpath}: points.layout {name!r} is not one of "
+                         f"{', '.join(BIN_LAYOUTS)}")
+    return str(name).lower()
+
+
+def _init_error(cpath: Path, value) -> tuple[float, float]:
+    """calib.yaml ``init_error``: ``[deg, m]`` or ``{rotation_deg: .., translation_m: ..}``."""
+    if isinstance(value, dict):
+        value = [value.get("rotation_deg"), value.get("translation_m")]
+    try:
+        deg, m = (float(v) for v in value)
+        ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(f"{cpath}: init_error must be [DEG, M] (or rotation_deg and "
+                         f"translation_m), two positive numbers, got {value!r}")
+    return deg, m
 
 
 def detect_source(source: Path, camera_index: int = 2) -> Source:
@@ -372,25 +485,35 @@ def select_frames(names: list[str], spec: str | None) -> list[int]:
     return chosen
 
 
-def read_frame(files: FrameFiles) -> Frame:
-    """Read one frame's image and points, undistorting the image when the camera has ``D``.
+def frame_mask(camera: Camera, mask: np.ndarray | None) -> np.ndarray | None:
+    """``mask`` (H, W) bool or None, and-ed with the pixels the lens model reaches
+    (:attr:`Camera.valid_pixels`); None when every pixel is usable."""
+    if not camera.ideal:
+        reach = camera.valid_pixels
+        if not reach.all():
+            return reach if mask is None else mask & reach
+    return mask
 
-    A fisheye (equidistant) image is remapped with ``cv2.fisheye`` to a pinhole image with the
-    same K, so the rest of the pipeline sees a plain pinhole camera either way.
+
+def read_frame(files: FrameFiles) -> Frame:
+    """Read one frame's image and points.
+
+    The image is kept as stored, with the camera's full lens model: every projection goes
+    through the model (nothing is undistorted, so no field of view is lost and no pixel is
+    resampled). The frame's mask is the calib.yaml mask and-ed with the pixels the model
+    reaches (for example the Mei model's fold-back region is masked).
     """
     image = read_image(files.image_path)
     cam = files.camera
     if image.shape[1] != cam.width or image.shape[0] != cam.height:
         raise InputError(f"{files.image_path}: image is {image.shape[1]}x{image.shape[0]} but the "
                          f"calibration says {cam.width}x{cam.height}")
-    if files.dist is not None and files.dist_model == "fisheye":
-        image = cv2.fisheye.undistortImage(image, cam.K, files.dist, Knew=cam.K,
-                                           new_size=(cam.width, cam.height))
-    elif files.dist is not None:
-        image = cv2.undistort(image, cam.K, files.dist)
-    points = read_points(files.points_path)
-    return Frame(files.name, image, points, cam, files.T_ref, files.image_path, files.points_path,
-                 kitti_rect=files.kitti_rect)
+    mask = frame_mask(cam, files.mask)
+    cloud = read_cloud(files.points_path, bin_layout=files.bin_layout)
+    return Frame(files.name, image, cloud.points, cam, files.T_ref, files.image_path,
+                 files.points_path, kitti_rect=files.kitti_rect, mask=mask, ring=cloud.ring,
+                 time=cloud.time, point_fields=dict(cloud.fields),
+                 sensor_pose=files.sensor_pose)
 
 
 def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) -> list[Frame]:
@@ -412,4 +535,13 @@ def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) 
     """
     src = detect_source(Path(source), camera)
     idx = select_frames([f.name for f in src.frames], frames)
-    return [read_frame(src.frames[i]) for i in idx]
+    out = [read_frame(src.frames[i]) for i in idx]
+    # The readers note what they could not find (no intensity field, an odd time unit) per
+    # file; say each thing once per source.
+    notes = {}
+    for f in out:
+        for w in f.point_fields.get("warnings", ()):
+            notes.setdefault(w, f.points_path)
+    for w, path in notes.items():
+        log.warning("%s: %s", path, w)
+    return out
