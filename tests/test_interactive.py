@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from paretocal import Settings, calibrate
-from paretocal.camera import project
+from paretocal.camera import Camera, project
 from paretocal.geometry import correction_matrix
 from paretocal.io.results import write_run
 from paretocal.report.interactive import write_interactive
@@ -280,3 +280,42 @@ def _check_page(browser, result, frames, out: Path, tmp_path: Path) -> None:
     assert not failed, f"failed requests: {failed}"
     assert all(u.startswith(("file:", "data:")) for u in urls), urls
     page.close()
+
+
+def test_page_projects_through_the_lens_model_in_browser(request, tmp_path):
+    """The page's JavaScript projects through a distorted pinhole, a fisheye and a Mei camera
+    exactly as paretocal.camera does (same points in view for every extrinsic)."""
+    sync_playwright = _require_browser()
+    result, frames, _ = request.getfixturevalue("run")
+    K = frames[0].camera.K
+    cams = {"radtan": Camera(K, 1242, 375, "pinhole", [-0.28, 0.09, 0.0008, -0.0005, -0.015]),
+            "fisheye": Camera(K, 1242, 375, "fisheye", [0.08, -0.03, 0.01, -0.002]),
+            "mei": Camera(K, 1242, 375, "mei", [0.0336, -0.0842, 0.001, -0.002, 0.0], xi=1.02)}
+    views = {"initial": result.T_init, "reference": result.T_ref, "chosen": result.T_cam_lidar}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS, headless=True)
+        try:
+            for name, cam in cams.items():
+                f = dataclasses.replace(frames[0], camera=cam)
+                path = write_interactive(result, [f], tmp_path / f"{name}.html")
+                data = _page_data(path.read_text(encoding="utf-8"))
+                assert data["camera"]["model"] == cam.model
+                xyz, z_min = _points(data), data["z_min"]
+                page = browser.new_page(viewport={"width": 1400, "height": 1100})
+                errors = []
+                page.on("pageerror", lambda e: errors.append(str(e)))
+                page.goto(path.as_uri())
+                page.wait_for_selector("body[data-ready='1']", timeout=60_000)
+                for view, T in views.items():
+                    key = str(result.chosen) if view == "chosen" else view
+                    page.click(f"#view-{view}")
+                    page.wait_for_function(
+                        f"document.getElementById('overlay').dataset.solution === '{key}'")
+                    count = _in_view_of_caption(page.evaluate(STATE_JS)[1])
+                    assert count == _in_view(xyz, f, T, z_min) > 1000, (name, view)
+                    if view == "chosen":   # not what an ideal pinhole would show
+                        assert count != _in_view(xyz, frames[0], T, z_min), name
+                assert not errors, errors
+                page.close()
+        finally:
+            browser.close()

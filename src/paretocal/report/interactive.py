@@ -3,7 +3,10 @@
 The page needs no network access: plotly.js is embedded inline, the camera image is a base64
 JPEG and the LiDAR points a base64 float32 array. The Pareto front is a Plotly scatter; the
 projection of the first frame's points is drawn client-side on a canvas, with the extrinsic of
-the solution clicked on the front, or the initial, chosen or reference extrinsic.
+the solution clicked on the front, or the initial, chosen or reference extrinsic. The page
+projects through the camera's own model (pinhole with radial-tangential distortion, fisheye,
+Mei) with the arithmetic of :meth:`paretocal.camera.Camera.project_camera_points`, on the
+image as it was taken.
 """
 
 from __future__ import annotations
@@ -48,25 +51,63 @@ JS = r"""
   var caption = document.getElementById("caption"), W = D.width, H = D.height;
   var bin = atob(D.points.b64), buf = new Uint8Array(bin.length);
   for (var b = 0; b < bin.length; b++) buf[b] = bin.charCodeAt(b);
-  var P = new Float32Array(buf.buffer), N = D.points.count, K = D.K, gd = null;
+  var P = new Float32Array(buf.buffer), N = D.points.count, gd = null;
   var img = new Image(), pending = null, plotReady = false, imageReady = false;
+  // The camera model as paretocal.camera.Camera.kernel_params (null stands for infinity).
+  var C = D.camera.params.map(function (v) { return v === null ? Infinity : v; });
+  var KIND = C[0], FX = C[1], FY = C[2], CX = C[3], CY = C[4], SK = C[5], XI = C[6];
+  var K1 = C[7], K2 = C[8], K3 = C[9], K4 = C[10], K5 = C[11], K6 = C[12], P1 = C[13], P2 = C[14];
+  var S1 = C[15], S2 = C[16], S3 = C[17], S4 = C[18], LIM = C[19], ZS_MIN = C[20];
+  var ZMIN = D.z_min, ZMIN2 = D.z_min * D.z_min, UV = [0, 0];
+
+  // Camera-frame point -> pixel (UV) through the lens model; false outside its domain.
+  // Kinds: 0 ideal pinhole, 1 pinhole with radial-tangential distortion, 2 fisheye
+  // (equidistant), 3 Mei (unified). Pixel origin at the centre of the top-left pixel.
+  function projectPoint(xc, yc, zc) {
+    var xd, yd;
+    if (KIND === 2) {
+      var rho2 = xc * xc + yc * yc;
+      if (!(rho2 + zc * zc > ZMIN2)) return false;
+      var rho = Math.sqrt(rho2), th = Math.atan2(rho, zc);
+      if (!(th < LIM)) return false;
+      var t2 = th * th, td = th * (1 + t2 * (K1 + t2 * (K2 + t2 * (K3 + t2 * K4))));
+      var sc = rho > 0 ? td / rho : 0;
+      xd = sc * xc; yd = sc * yc;
+    } else {
+      var den = zc;
+      if (KIND === 3) {
+        var n2 = xc * xc + yc * yc + zc * zc;
+        if (!(n2 > ZMIN2)) return false;
+        var nrm = Math.sqrt(n2);
+        if (!(zc > ZS_MIN * nrm)) return false;
+        den = zc + XI * nrm;
+      } else if (!(zc > ZMIN)) return false;
+      var iden = 1 / den, xn = xc * iden, yn = yc * iden;
+      if (KIND === 0) { xd = xn; yd = yn; }
+      else {
+        var r2 = xn * xn + yn * yn;
+        if (!(r2 < LIM)) return false;
+        var r4 = r2 * r2, xy = xn * yn;
+        var rad = (1 + r2 * (K1 + r2 * (K2 + r2 * K3))) / (1 + r2 * (K4 + r2 * (K5 + r2 * K6)));
+        xd = xn * rad + 2 * P1 * xy + P2 * (r2 + 2 * xn * xn) + S1 * r2 + S2 * r4;
+        yd = yn * rad + P1 * (r2 + 2 * yn * yn) + 2 * P2 * xy + S3 * r2 + S4 * r4;
+      }
+    }
+    UV[0] = FX * xd + SK * yd + CX; UV[1] = FY * yd + CY;
+    return isFinite(UV[0]) && isFinite(UV[1]);
+  }
 
   function draw(T) {
-    // A = K @ T[:3]: pixel origin at the centre of the top-left pixel.
-    var A = [0, 1, 2].map(function (r) {
-      return [0, 1, 2, 3].map(function (c) {
-        return K[r][0] * T[0][c] + K[r][1] * T[1][c] + K[r][2] * T[2][c];
-      });
-    });
     var vis = [], zs = new Float64Array(N), us = new Float64Array(N), vs = new Float64Array(N);
     for (var i = 0; i < N; i++) {
       var x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
-      var hz = A[2][0] * x + A[2][1] * y + A[2][2] * z + A[2][3];
-      if (!(hz > D.z_min)) continue;
-      var u = (A[0][0] * x + A[0][1] * y + A[0][2] * z + A[0][3]) / hz;
-      var v = (A[1][0] * x + A[1][1] * y + A[1][2] * z + A[1][3]) / hz;
+      var xc = T[0][0] * x + T[0][1] * y + T[0][2] * z + T[0][3];
+      var yc = T[1][0] * x + T[1][1] * y + T[1][2] * z + T[1][3];
+      var zc = T[2][0] * x + T[2][1] * y + T[2][2] * z + T[2][3];
+      if (!projectPoint(xc, yc, zc)) continue;
+      var u = UV[0], v = UV[1];
       if (u < 0 || u > W - 1 || v < 0 || v > H - 1) continue;
-      zs[i] = hz; us[i] = u; vs[i] = v; vis.push(i);
+      zs[i] = zc; us[i] = u; vs[i] = v; vis.push(i);
     }
     vis.sort(function (a, c) { return zs[c] - zs[a]; });   // far first, near on top
     ctx.drawImage(img, 0, 0, W, H);
@@ -338,6 +379,8 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
     data = {
         "frame": f.name, "width": int(cam.width), "height": int(cam.height),
         "K": np.asarray(cam.K, dtype=float).tolist(), "z_min": z_min, "max_depth": MAX_DEPTH,
+        "camera": {**cam.to_dict(), "params": [float(v) if np.isfinite(v) else None
+                                               for v in cam.kernel_params()]},
         "image": "data:image/jpeg;base64," + base64.b64encode(jpeg.tobytes()).decode("ascii"),
         "points": {"count": int(len(pts)), "dtype": "float32", "layout": "xyz",
                    "b64": base64.b64encode(pts.tobytes()).decode("ascii")},
