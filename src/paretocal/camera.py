@@ -221,7 +221,27 @@ class Camera:
             inside the image is :func:`in_image`'s business.
         """
         Xc = np.asarray(Xc, dtype=np.float64)
-        X, Y, Z = Xc[..., 0], Xc[..., 1], Xc[..., 2]
+        u, v, valid = self.project_xyz(Xc[..., 0], Xc[..., 1], Xc[..., 2], z_min)
+        uv = np.stack([u, v], axis=-1)
+        uv[~valid] = np.nan
+        return uv, valid
+
+    def project_xyz(self, X: np.ndarray, Y: np.ndarray, Z: np.ndarray, z_min: float = Z_MIN
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`project_camera_points` on separate coordinate arrays, for batched callers.
+
+        Parameters
+        ----------
+        X, Y, Z : ndarray, shape (...)
+            Camera-frame coordinates in metres, all of one shape.
+        z_min : float
+
+        Returns
+        -------
+        u, v : ndarray, shape (...), float64
+            Pixel coordinates, meaningless (not NaN-filled) where ``valid`` is False.
+        valid : ndarray of bool, shape (...)
+        """
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             if self.model == "pinhole":
                 valid = Z > z_min
@@ -253,10 +273,8 @@ class Camera:
                 x, y = self._distort(x, y, r2)
             u = self.K[0, 0] * x + self.K[0, 1] * y + self.K[0, 2]
             v = self.K[1, 1] * y + self.K[1, 2]
-        uv = np.stack([u, v], axis=-1)
-        valid &= np.isfinite(uv).all(axis=-1)
-        uv[~valid] = np.nan
-        return uv, valid
+            valid &= np.isfinite(u) & np.isfinite(v)
+        return u, v, valid
 
     def _distort(self, x, y, r2):
         """The radial-tangential step on normalised coordinates (arrays of one shape)."""

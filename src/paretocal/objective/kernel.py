@@ -361,7 +361,7 @@ def sums_numpy(scene: Scene, T: np.ndarray, n: np.ndarray, chunk_points: int = 4
         m_all = b - a
         if m_all == 0:
             continue
-        P = _frame_points(scene, f)
+        Pt = _frame_points(scene, f).T.copy()                    # (3, m)
         cam = scene.cameras[f]
         grp = scene.group[a:b]
         wt = scene.weight[a:b].astype(np.float64)
@@ -370,9 +370,8 @@ def sums_numpy(scene: Scene, T: np.ndarray, n: np.ndarray, chunk_points: int = 4
         step = max(1, chunk_points // m_all)
         for c0 in range(0, C, step):
             Rc = R[c0:c0 + step]                                  # (c, 3, 4)
-            Xc = np.einsum("cij,mj->cmi", Rc[:, :, :3], P) + Rc[:, None, :, 3]
-            uv, valid = cam.project_camera_points(Xc, scene.z_min)
-            u, v = uv[..., 0], uv[..., 1]
+            X, Y, Z = (Rc[:, k, :3] @ Pt + Rc[:, k, 3:] for k in range(3))   # (c, m) each
+            u, v, valid = cam.project_xyz(X, Y, Z, scene.z_min)
             used = np.arange(m_all)[None, :] < n[c0:c0 + step, None]
             with np.errstate(invalid="ignore"):
                 ok = valid & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
