@@ -392,7 +392,7 @@ def test_n_range_beyond_what_the_frames_hold(capfd, tmp_path, rig, args, expect)
     ("search: {pop: [1,\n", "not valid YAML (line 2, column 1"),
     ("just a string\n", "expected a mapping (key: value) at the top level, got a str"),
     ("search: {pop: many}\n", "search.pop: expected a whole number, got 'many'"),
-    ("search: {bound_t_m: abc}\n", "search.bound_t_m: expected a number, got 'abc'"),
+    ("search: {bound_t_m: abc}\n", "search.bound_t_m: expected a number or null, got 'abc'"),
     ("search: 5\n", "section 'search' must be a mapping of settings (key: value), got 5"),
     ("features: {grid: 5}\n", "features.grid: expected a list of 2 whole numbers, got 5"),
     ("camera: two\n", "camera: expected a whole number, got 'two'"),
@@ -564,7 +564,8 @@ def _fake_result(**over):
     X = np.zeros((1, 7))
     X[0, :6] = over.pop("x", np.zeros(6))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
-                        front=SimpleNamespace(X=X), quality=q,
+                        front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
+                        feature_counts={},
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0}))
     in_view = over.pop("in_view", 0.9)
     r.objectives = lambda: {"chamfer": 1.0, "in_view": in_view}

@@ -87,6 +87,22 @@ class _Progress:
             self.bar.__exit__(*exc)
 
 
+def _dataset_options(settings, source, take_init_error: bool):
+    """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
+    line or the config file already set them."""
+    from .config import SearchSettings
+    from .io import detect_source
+
+    opts = detect_source(Path(source), settings.camera).options
+    s = settings.search
+    if (take_init_error and "init_error" in opts
+            and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
+                                                       SearchSettings.init_error_m)):
+        deg, m = opts["init_error"]
+        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    return settings
+
+
 def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
     """``"DEG,M"`` (or a two-item list) -> (deg, m); (None, None) for None."""
     import math
@@ -189,6 +205,7 @@ def calibrate(
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
+    settings = _dataset_options(settings, source, err_deg is None)
     settings.validate()
     check_output_dir(out)
     T_init = read_extrinsic(init) if init is not None else None
@@ -223,7 +240,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
         with _Progress(interactive) as progress:
             result = run_calibration(loaded, T_init, settings, progress=progress,
                                      checkpoint=ckpt)
-            write_run(result, out, loaded, figures=figures)
+            write_run(result, out, result.sweeps or loaded, figures=figures)
     except SearchInterrupted as exc:
         from .io.results import partial_front_csv
 

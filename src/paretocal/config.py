@@ -128,6 +128,16 @@ class DecisionSettings:
 
 
 @dataclass(frozen=True)
+class MotionSettings:
+    """De-skewing clouds recorded while moving (see :mod:`paretocal.motion`)."""
+
+    deskew: str = "auto"             #: "auto": when every cloud has per-point time; "off"
+    time_offset_s: float = 0.0       #: image time minus the sweep's centre time (s)
+    per_frame: bool = True           #: each frame its own twist (the speed may change)
+    points: int = 15000              #: points per cloud for the ego-motion registration
+
+
+@dataclass(frozen=True)
 class Settings:
     """All settings of one calibration run."""
 
@@ -135,6 +145,7 @@ class Settings:
     objective: ObjectiveSettings = field(default_factory=ObjectiveSettings)
     search: SearchSettings = field(default_factory=SearchSettings)
     decision: DecisionSettings = field(default_factory=DecisionSettings)
+    motion: MotionSettings = field(default_factory=MotionSettings)
     camera: int = 2
     frames: str | None = None
 
@@ -171,7 +182,7 @@ class Settings:
     def validate(self) -> "Settings":
         """Raise :class:`SettingsError` naming the option when a value is out of range."""
         s, o, f, d = self.search, self.objective, self.features, self.decision
-        for section in (s, o, f, d):
+        for section in (s, o, f, d, self.motion):
             for fl in fields(section):
                 v = getattr(section, fl.name)
                 if isinstance(v, float) and not math.isfinite(v):
@@ -235,6 +246,13 @@ class Settings:
             raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
         if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
+        m = self.motion
+        if m.deskew not in ("auto", "off"):
+            raise SettingsError(f"motion.deskew {m.deskew!r}: choose auto or off")
+        if not abs(m.time_offset_s) <= 1.0:
+            raise SettingsError(f"--time-offset {m.time_offset_s}: at most 1 s either way")
+        if m.points < 1000:
+            raise SettingsError(f"motion.points {m.points}: at least 1000")
         if d.refine_iters < 0:
             raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
         if f.ring_method not in ("auto", "field", "scan", "lines", "elevation"):

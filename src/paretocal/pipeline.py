@@ -23,7 +23,7 @@ from .quality import quality_report
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
-from .search.basin import CLEAR_P, prefer_near
+from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
 
 log = logging.getLogger(__name__)
@@ -50,6 +50,9 @@ RELIABLE_BOUND_MARGIN = 0.01
 #: the pose by more than a usable calibration allows (1 deg moves a point 20 m away by 35 cm).
 RELIABLE_MAX_SE_DEG = 1.0
 RELIABLE_MAX_SE_CM = 10.0
+#: A sweep skewed by more than this (m) and not de-skewed misplaces points by up to half of
+#: it: the same scale as the translation error a usable calibration allows.
+MAX_UNCOMPENSATED_SKEW_M = 0.1
 
 
 @dataclass
@@ -98,6 +101,12 @@ class CalibrationResult:
     quality: dict | None = None
     #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
     reliability: dict | None = None
+    #: What was done about motion during the sweeps (see :func:`compensate_motion`).
+    motion: dict | None = None
+    #: What the input files offered: the point fields used, the camera model, notes.
+    inputs: dict | None = None
+    #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
+    sweeps: list | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
     #: search, for studies that evaluate more candidates; not written to result.json.
     objective: CalibrationObjective | None = None
@@ -159,6 +168,8 @@ class CalibrationResult:
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
             "quality": self.quality,
+            "motion": self.motion,
+            "inputs": self.inputs,
             "reliability": self.reliability if self.reliability is not None
             else reliability(self),
         }
@@ -198,20 +209,98 @@ def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings
     return out
 
 
+def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Frame], dict]:
+    """De-skew every sweep to its image time with ego-motion estimated from the sequence.
+
+    A spinning LiDAR on a moving vehicle stores each point at its own time (a 10 Hz sweep at
+    30 m/s spans 3 m); the image is exposed at one time. When every cloud has per-point time,
+    the twist is estimated by registering consecutive sweeps (:func:`paretocal.motion.
+    estimate_motion`) and each sweep is expressed at its centre time plus
+    ``settings.motion.time_offset_s``. The motion is applied only when the registration
+    constrains it along every axis; otherwise the sweeps stay as recorded and the returned
+    record says why.
+
+    Returns
+    -------
+    frames : list of Frame
+        De-skewed copies (points in the same order), or the input frames.
+    info : dict
+        ``compensated`` (bool), ``reason`` (when not), the estimate's figures, and
+        ``max_shift_m``: the largest displacement the de-skew applied to a point.
+    """
+    import dataclasses
+
+    from . import motion as mo
+
+    m = settings.motion
+    if m.deskew == "off":
+        return frames, {"compensated": False, "reason": "de-skewing is off (motion.deskew)"}
+    if any(f.time is None for f in frames):
+        return frames, {"compensated": False,
+                        "reason": "the clouds carry no per-point time: motion during a sweep "
+                                  "is not compensated (a moving vehicle's clouds are skewed)"}
+    if len(frames) < 2:
+        return frames, {"compensated": False,
+                        "reason": "one frame: ego-motion needs a sequence of sweeps"}
+    order = np.argsort([float(np.median(f.time)) for f in frames], kind="stable")
+    clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), frames[k].time)
+              for k in order]
+    try:
+        est = mo.estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
+                                 seed=settings.search.seed)
+    except ValueError as exc:
+        return frames, {"compensated": False, "reason": f"ego-motion estimate failed: {exc}"}
+    info = {"speed_mps": round(float(est.speed), 3),
+            "speed_spread_mps": round(float(est.speed_spread), 3),
+            "v_mps": [round(float(v), 3) for v in est.twist.v],
+            "yaw_rate_dps": round(float(np.degrees(est.twist.w[2])), 3),
+            "observable_xyz": [bool(v) for v in est.observable],
+            "median_share_xyz": [round(float(v), 4) for v in np.median(est.share, axis=0)],
+            "time_offset_s": m.time_offset_s}
+    sweep = max(float(np.ptp(f.time)) for f in frames)
+    info["skew_m"] = round(float(est.speed) * sweep, 3)
+    if not est.compensable:
+        axes = "".join(a for a, ok in zip("xyz", est.observable) if not ok)
+        info.update(compensated=False,
+                    reason=f"ego-motion is not observable along {axes} (the scene does not "
+                           "constrain scan-to-scan registration there): not compensated")
+        return frames, info
+    out = list(frames)
+    shift = 0.0
+    for j, k in enumerate(order):
+        f = frames[k]
+        t_ref = mo.sweep_centre(f.time) + m.time_offset_s
+        xyz = mo.deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
+        shift = max(shift, float(np.max(np.linalg.norm(xyz - f.points[:, :3], axis=1))))
+        pts = f.points.copy()
+        pts[:, :3] = xyz
+        out[k] = dataclasses.replace(f, points=np.ascontiguousarray(pts, dtype=np.float32))
+    info.update(compensated=True, max_shift_m=round(shift, 3))
+    log.info("de-skewed %d sweeps: %.2f m/s, largest shift %.2f m", len(frames), est.speed,
+             shift)
+    return out, info
+
+
 def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
-    """The rings of every frame's sweep, with one warning per problem (not per frame).
+    """The rings of every frame's sweep (see :func:`~paretocal.features.prepare.frame_rings`);
+    :func:`warn_rings` tells the user about the implausible ones."""
+    seq = np.random.SeedSequence([settings.search.seed, 1])
+    return [frame_rings(f, settings.features, np.random.default_rng(child))
+            for f, child in zip(frames, seq.spawn(len(frames)))]
+
+
+def warn_rings(frames: list[Frame], rings: list[Rings]) -> None:
+    """One warning per ring problem (not per frame), naming a file and what to do.
 
     Rings that do not fit the line model (purity below
-    :data:`~paretocal.features.rings.MIN_PURITY`) are still used, but the user is told which
-    files and what to do: a wrong ring structure makes depth edges noise.
+    :data:`~paretocal.features.rings.MIN_PURITY`) are still used, but a wrong ring structure
+    makes depth edges noise. Called once the scene is known to be usable, so that a bad-input
+    error is the only line the user sees.
     """
-    seq = np.random.SeedSequence([settings.search.seed, 1])
-    out = [frame_rings(f, settings.features, np.random.default_rng(child))
-           for f, child in zip(frames, seq.spawn(len(frames)))]
-    notes = sorted({n for r in out for n in r.notes})
+    notes = sorted({n for r in rings for n in r.notes})
     for n in notes[:3]:
         log.warning("%s", n)
-    bad = [(f, r) for f, r in zip(frames, out) if r.purity < MIN_PURITY]
+    bad = [(f, r) for f, r in zip(frames, rings) if r.purity < MIN_PURITY]
     if bad:
         f, r = bad[0]
         hint = ("the cloud is not in the sensor's own frame: give the LiDAR's pose "
@@ -221,7 +310,6 @@ def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
                     "returns on their ring's cone; %d of %d frames like this); depth edges "
                     "will be unreliable; %s", f.points_path, r.n_rings, 100 * r.purity,
                     len(bad), len(frames), hint)
-    return out
 
 
 def _check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
@@ -341,15 +429,22 @@ def reliability(result: "CalibrationResult") -> dict:
                            f"{', '.join(beyond)}: the optimum lies outside the box; widen "
                            "--bound-t / --bound-r")
     basin = (result.decision or {}).get("basin") or {}
-    if basin and not basin.get("same_basin", True):
+    if basin.get("ambiguous"):
         alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
-        if basin.get("kept") == "near":
-            reasons.append(
-                f"ambiguous: a pose {alt} away fits the frames about as well (paired test "
-                f"over {basin['frames']} frames: p = {basin['p']:.2g}, {CLEAR_P:g} needed); the "
-                "result is the optimum next to the initial extrinsic; add frames with more "
-                "varied structure, or state a smaller --init-error if the start is known to "
-                "be close")
+        p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]
+        beyond = basin["kept"] == "near"
+        where = ("the result is the optimum next to the initial extrinsic, the other lies "
+                 "beyond the stated --init-error" if beyond else
+                 "the result is the one that fits better")
+        reasons.append(
+            f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
+            f"{basin['frames']} frames: p = {p:.2g}); {where}; add frames with more varied "
+            "structure, or state a smaller --init-error if the start is known to be close")
+    mo = result.motion or {}
+    if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
+        reasons.append(f"the LiDAR moved {mo['skew_m']:.2g} m during a sweep and the motion "
+                       f"could not be compensated ({mo.get('reason')}): moving structure is "
+                       "misplaced by up to half that")
     rings = (result.feature_counts or {}).get("ring_recovery") or {}
     if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
         reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
@@ -458,10 +553,16 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
+    # Rings from the sweeps as recorded (each return on its laser's cone about the sensor);
+    # everything else from the sweeps de-skewed to the image time.
     rings = sweep_rings(frames, settings)
     timings["rings"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    frames, motion_info = compensate_motion(frames, settings)
+    timings["motion"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     stage = _Stage(frames, T_init, T_init, settings, report("features"), rings)
+    warn_rings(frames, rings)
     feats, scene, objective, cost_model = stage.feats, stage.scene, stage.objective, stage.cost
     n_min, n_max = stage.n_min, stage.n_max
     timings["features"] = time.perf_counter() - t0
@@ -555,10 +656,27 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         timings=timings, frames=[f.name for f in frames],
         feature_counts=_feature_counts(feats), n_range=(n_min, n_max), history=res.history,
         nsga_front=(res.X, res.F), quality=quality, objective=objective, seed_poses=seeds)
+    result.motion = motion_info
+    result.inputs = _inputs(frames)
+    result.sweeps = frames
     result.reliability = reliability(result)
     if result.reliability["verdict"] != "ok":
         log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))
     return result
+
+
+def _inputs(frames: list[Frame]) -> dict:
+    """What the inputs offered (result.json ``inputs``): the point-cloud fields that gave
+    intensity, ring and time, the reader's notes, the camera model and the LiDAR pose."""
+    pf = dict(frames[0].point_fields or {})
+    notes = sorted({w for f in frames for w in (f.point_fields or {}).get("warnings", ())})
+    pf.pop("warnings", None)
+    cam = frames[0].camera
+    return {"point_fields": pf, "notes": notes,
+            "camera_model": getattr(cam, "model", "pinhole"),
+            "lidar_pose": None if frames[0].sensor_pose is None
+            else np.asarray(frames[0].sensor_pose).tolist(),
+            "mask": frames[0].mask is not None}
 
 
 def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:

@@ -336,6 +336,25 @@ def _extract_lines(te: np.ndarray, inv: np.ndarray) -> list[tuple[float, float, 
     return lines
 
 
+#: Points labelled at a time: the (points, lines) residual matrix then stays near 32 MB.
+LABEL_BLOCK = 1 << 15
+
+
+def nearest_line(te: np.ndarray, inv: np.ndarray, a: np.ndarray,
+                 h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest line ``te = a + h inv`` per point and its absolute residual,
+    shapes (N,) and (N,), computed block by block (bounded memory for any cloud size)."""
+    lab = np.empty(len(te), dtype=np.int64)
+    res = np.empty(len(te), dtype=np.float64)
+    for i in range(0, len(te), LABEL_BLOCK):
+        r = np.abs(te[i:i + LABEL_BLOCK, None]
+                   - (a[None, :] + h[None, :] * inv[i:i + LABEL_BLOCK, None]))
+        k = r.argmin(axis=1)
+        lab[i:i + LABEL_BLOCK] = k
+        res[i:i + LABEL_BLOCK] = r[np.arange(len(k)), k]
+    return lab, res
+
+
 def _k_lines(te: np.ndarray, inv: np.ndarray, a: np.ndarray, h: np.ndarray,
              iters: int, min_points: int):
     """Assign every point to its nearest line and refit; drop lines left with few points."""
@@ -444,11 +463,9 @@ def rings_from_lines(points: np.ndarray, rng: np.random.Generator | int | None =
     a, h, s = _k_lines(ts, ivs, a, h, 2, min_points)
     a, h, s = _merge_split(ts, ivs, a, h, s, min_points)
     # Label every point: nearest line, within tolerance.
-    te_u, inv_u = te[idx], inv[idx]
-    res = np.abs(te_u[:, None] - (a[None, :] + h[None, :] * inv_u[:, None]))
-    lab = res.argmin(axis=1)
+    lab, res = nearest_line(te[idx], inv[idx], a, h)
     tol = LINE_TOL_SIGMA * np.maximum(s, np.median(s))
-    within = res[np.arange(len(idx)), lab] < tol[lab] * 2.0
+    within = res < tol[lab] * 2.0
     order = ring_order(a, h)
     rank = np.empty(len(order), dtype=np.int32)
     rank[order] = np.arange(len(order), dtype=np.int32)
