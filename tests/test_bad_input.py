@@ -563,10 +563,13 @@ def _fake_result(**over):
     q.update(over.pop("quality", {}))
     X = np.zeros((1, 7))
     X[0, :6] = over.pop("x", np.zeros(6))
+    deg, m = over.pop("init_error", (10.0, 0.3))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
                         feature_counts={},
-                        settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0}))
+                        settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
+                                                            "init_error_deg": deg,
+                                                            "init_error_m": m}))
     in_view = over.pop("in_view", 0.9)
     r.objectives = lambda: {"chamfer": 1.0, "in_view": in_view}
     return r
@@ -584,6 +587,10 @@ def _fake_result(**over):
     ({"quality": {"jackknife_se": {"x": 12.0, "y": 1, "z": 1, "yaw": 1.5, "pitch": 0,
                                    "roll": 0}}},
      "the frames disagree: jackknife standard error x 12 cm, yaw 1.5 deg"),
+    ({"x": [0, 0.075, 0, 0, 0, 0], "init_error": (10.0, 0.05)},
+     "the correction lies beyond the stated initial error (y 7.5 cm"),
+    ({"x": [0, 0, 0, 0, 1.6, 0], "init_error": (1.0, 0.3)},
+     "the correction lies beyond the stated initial error (pitch 1.6 deg"),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.pipeline import reliability

@@ -29,6 +29,7 @@ class FeatureSettings:
     blur_sigma: float = 1.0          #: Gaussian sigma (px) before Canny
     canny_low: float = 50.0          #: Canny hysteresis thresholds
     canny_high: float = 150.0
+    canny_relative: bool = False     #: thresholds for a full-range image, scaled by exposure
     min_edge_px: int = 0             #: drop edge fragments smaller than this (px)
     depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
     cross_ring: bool = True          #: also detect edges against the rings above and below
@@ -38,6 +39,8 @@ class FeatureSettings:
     along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
     cross_fraction: float = 0.25     #: the same across rings (see README, Method)
     edge_support: bool = False       #: keep depth edges only where the near side is a surface
+    edge_contour: bool = True        #: keep depth edges only where their contour continues
+    sky_edges: bool = False          #: also edges at the top of objects against the sky
     intensity_jump: float = 0.5      #: intensity jump for an intensity edge (x the 99th pct)
     min_range_m: float = 1.5
     max_range_m: float = 70.0

@@ -417,6 +417,17 @@ def reliability(result: "CalibrationResult") -> dict:
                        f"(+-{s.bound_t:g} m, +-{s.bound_r:g} deg): the optimum may lie "
                        "outside; if the initial extrinsic may be further off, say so with "
                        "--init-error, or improve --init")
+    err = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
+    beyond = [a for a, v, e in zip(AXES, x, err) if abs(v) > e and a not in at_bound]
+    if beyond:
+        units = ["cm" if a in ("x", "y", "z") else "deg" for a in beyond]
+        scale = [100.0 if u == "cm" else 1.0 for u in units]
+        moved = ", ".join(f"{a} {abs(x[AXES.index(a)]) * k:.3g} {u}"
+                          for a, u, k in zip(beyond, units, scale))
+        reasons.append(f"the correction lies beyond the stated initial error ({moved}; "
+                       f"--init-error {s.init_error_deg:g},{s.init_error_m:g}): either the "
+                       "start was worse than stated (say so with --init-error) or the frames "
+                       "mislead the objective; check the overlays")
     q = result.quality or {}
     step = q.get("step_to_local_optimum")
     if step is not None:

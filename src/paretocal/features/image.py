@@ -41,8 +41,46 @@ class ImageFeatures:
     mask: np.ndarray | None = None
 
 
+#: The image level taken as "white" when thresholds are relative (percentile of the usable
+#: pixels): a few saturated lamps or reflections must not set the scale.
+WHITE_PERCENTILE = 99.0
+#: Relative thresholds never go below this many noise standard deviations of the gradient
+#: (estimated from the median gradient, an upper bound in natural images where most pixels
+#: are flat): a Rayleigh tail at 6 sigma is exp(-18), so noise alone makes no edge.
+NOISE_SIGMAS = 6.0
+#: The median of a Rayleigh distribution is 1.1774 sigma.
+RAYLEIGH_MEDIAN = 1.1774
+
+
+def canny_thresholds(gray: np.ndarray, low: float, high: float,
+                     mask: np.ndarray | None = None) -> tuple[float, float]:
+    """Canny thresholds for ``gray`` (H, W) uint8, given ``low`` and ``high`` for an image that
+    uses the full 0-255 range.
+
+    A dark image (night, underexposed) has weaker gradients for the same scene contrast: the
+    thresholds scale with the image's white level (its :data:`WHITE_PERCENTILE` percentile over
+    the usable pixels), as if it had been stretched to the full range, but never below
+    :data:`NOISE_SIGMAS` noise deviations. An image whose white level reaches 255 keeps the
+    thresholds as given.
+    """
+    usable = gray if mask is None else gray[np.asarray(mask, dtype=bool)]
+    if usable.size == 0:
+        return low, high
+    white = float(np.percentile(usable, WHITE_PERCENTILE))
+    scale = min(1.0, max(white, 1.0) / 255.0)
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1)
+    g = np.hypot(gx, gy)
+    sigma_g = float(np.median(g if mask is None else g[np.asarray(mask, dtype=bool)])) \
+        / RAYLEIGH_MEDIAN
+    floor = NOISE_SIGMAS * sigma_g
+    hi = max(high * scale, min(high, floor))
+    return hi * low / high, hi
+
+
 def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
-             canny_high: float = 150.0, min_edge_px: int = 0) -> np.ndarray:
+             canny_high: float = 150.0, min_edge_px: int = 0, relative: bool = False,
+             mask: np.ndarray | None = None) -> np.ndarray:
     """Canny edges of a Gaussian-blurred grey image.
 
     Parameters
@@ -54,6 +92,11 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
         Hysteresis thresholds on the L2 gradient magnitude.
     min_edge_px : int
         Drop connected edge fragments of fewer pixels (foliage, noise); 0 keeps all.
+    relative : bool
+        The thresholds are for a full-range image and scale with the image's white level
+        (:func:`canny_thresholds`).
+    mask : ndarray, shape (H, W), bool, optional
+        Usable pixels, for the white level and noise of relative thresholds.
 
     Returns
     -------
@@ -62,6 +105,8 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
     gray = image_bgr if image_bgr.ndim == 2 else cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
     if blur_sigma > 0:
         gray = cv2.GaussianBlur(gray, (0, 0), blur_sigma)
+    if relative:
+        canny_low, canny_high = canny_thresholds(gray, canny_low, canny_high, mask)
     edges = cv2.Canny(gray, canny_low, canny_high, L2gradient=True)
     if min_edge_px > 1:
         n, labels, stats, _ = cv2.connectedComponentsWithStats(edges, connectivity=8)
@@ -94,14 +139,16 @@ def drop_masked_edges(edges: np.ndarray, mask: np.ndarray, blur_sigma: float) ->
 
 def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
                    canny_high: float = 150.0, truncation_px: float = 10.0,
-                   min_edge_px: int = 0, mask: np.ndarray | None = None) -> ImageFeatures:
+                   min_edge_px: int = 0, mask: np.ndarray | None = None,
+                   relative: bool = False) -> ImageFeatures:
     """Edge map, truncated distance transform and edge pixel list of one image.
 
     ``mask`` (H, W) bool, True on usable pixels: edges on or near masked pixels are dropped
     before the distance transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over
-    the usable pixels.
+    the usable pixels. ``relative``: thresholds scaled to the image's exposure
+    (:func:`canny_thresholds`).
     """
-    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px)
+    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px, relative, mask)
     if mask is not None:
         edges = drop_masked_edges(edges, mask, blur_sigma)
     v, u = np.nonzero(edges)

@@ -29,6 +29,9 @@ GRAZING_MIN_DEG = 1.6
 #: Neighbours along a ring more than this many azimuth steps apart (the sensor's median step)
 #: are not compared: returns are missing in between. On KITTI (0.17 deg steps) this is 1 deg.
 MAX_GAP_STEPS = 6.0
+#: Neighbouring returns are recorded within a few firings of each other; two returns more than
+#: this share of the sweep's duration apart lie on either side of the seam.
+MAX_NEIGHBOUR_DT_SWEEPS = 0.5
 
 
 @dataclass(eq=False)
@@ -72,10 +75,13 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                    max_range_m: float = 70.0, max_gap_deg: float | None = None,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
                    along_fraction: float = 0.5, cross_fraction: float = 0.5,
-                   edge_support: bool = False,
+                   edge_support: bool = False, edge_contour: bool = False,
                    rng: np.random.Generator | int | None = 0,
                    ring: np.ndarray | Rings | None = None,
-                   ring_spacing_deg: float | None = None) -> LidarFeatures:
+                   ring_spacing_deg: float | None = None,
+                   ring_elevation_deg: np.ndarray | None = None,
+                   time: np.ndarray | None = None,
+                   sweep_s: float | None = None, sky_edges: bool = False) -> LidarFeatures:
     """Extract feature points from one sweep.
 
     Parameters
@@ -90,8 +96,10 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     cross_jump_m, cross_jump_rel : float
         Across rings the far return must be farther by ``max(cross_jump_m, cross_jump_rel * r)``
         (the relative part keeps the ground, seen at grazing angles, from making edges).
-        ``None`` (default) derives ``cross_jump_rel`` from the ring spacing and
-        :data:`GRAZING_MIN_DEG`.
+        ``None`` (default) derives ``cross_jump_rel`` from the elevation gap between the two
+        rings compared and :data:`GRAZING_MIN_DEG` (per pair when the rings' elevations are
+        known, so that sensors with uneven spacing, dense at the horizon and sparse below,
+        get the threshold each pair of lasers needs).
     ground_tol_m : float, optional
         When set, a pair across rings whose two returns both lie within this height of the
         ground (the 5th percentile of z within 30 m) is never an edge, which lets a smaller
@@ -117,6 +125,10 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         on the other side (along the ring, or on the two rings on the other side across
         rings) lie within ``0.05 r + 0.1`` m of its range. Foliage and other isolated returns
         jump in range at almost every return and make edges that no image edge matches.
+    edge_contour : bool
+        Keep a depth edge only when its contour continues: a vertical contour (an edge along
+        the ring) on the ring above or below, a horizontal one (across rings) on a neighbouring
+        return of its ring, both near the same range. Needs ``cross_ring``.
     rng : numpy Generator or seed
         Drives the subsampling of smooth points.
     ring : ndarray, shape (N,), or Rings, optional
@@ -124,7 +136,22 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         whole sweep before cropping it); recovered with ``ring_method`` otherwise.
     ring_spacing_deg : float, optional
         The sensor's median elevation gap between neighbouring rings; taken from ``ring`` when
-        it is a :class:`~paretocal.features.rings.Rings`, else from the rings' elevations.
+        it is a :class:`~paretocal.features.rings.Rings`. Used when ``ring_elevation_deg`` is
+        not known.
+    ring_elevation_deg : ndarray, shape (R,), optional
+        Far-field elevation of each ring id (deg); taken from ``ring`` when it is a
+        :class:`~paretocal.features.rings.Rings`.
+    time : ndarray, shape (N,), optional
+        Per-point time (s). Returns recorded more than half a sweep apart are not neighbours
+        (:data:`MAX_NEIGHBOUR_DT_SWEEPS`): at the seam where a sweep starts and ends, the two
+        sides were scanned a revolution apart, and on a moving vehicle they do not meet.
+    sweep_s : float, optional
+        The whole sweep's duration (s) when ``points`` are part of it; the span of ``time``
+        otherwise.
+    sky_edges : bool
+        Also mark the top of objects against the sky (the laser just above returned nothing
+        at this azimuth): tree lines, poles and signs against the sky, which are strong image
+        edges at dusk and night. Needs the rings' elevations.
 
     Returns
     -------
@@ -139,6 +166,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     if isinstance(ring, Rings):
         if ring_spacing_deg is None and ring.n_rings > 1:
             ring_spacing_deg = float(np.nanmedian(ring.spacing_deg()))
+        if ring_elevation_deg is None and ring.n_rings > 1:
+            ring_elevation_deg = ring.elevation_deg
         n_rings, ring = ring.n_rings, ring.ring
     else:
         ring = np.asarray(ring)
@@ -150,6 +179,13 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     order = np.lexsort((psi, ring))
     xyz, refl, r, ring, psi, src = (xyz[order], refl[order], r[order], ring[order], psi[order],
                                     src[order])
+    t = None
+    if time is not None and len(time) == len(pts) and len(src):
+        t = np.asarray(time, dtype=np.float64)[src]
+        span = sweep_s if sweep_s is not None else float(np.ptp(np.asarray(time, np.float64)))
+        max_dt = MAX_NEIGHBOUR_DT_SWEEPS * span
+        if not max_dt > 0:
+            t = None
     n = len(xyz)
     if n < 3:
         empty = np.zeros((0, 3))
@@ -175,6 +211,9 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     dpsi_p = np.mod(psi - psi[prv], 2 * np.pi)
     ok_n = (dpsi_n < gap) & (nxt != np.arange(n))
     ok_p = (dpsi_p < gap) & (prv != np.arange(n))
+    if t is not None:
+        ok_n &= np.abs(t[nxt] - t) < max_dt
+        ok_p &= np.abs(t[prv] - t) < max_dt
 
     # Along-ring depth edges: the near side of a jump to either neighbour.
     jump_n = np.where(ok_n, r[nxt] - r, 0.0)
@@ -197,7 +236,12 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                                        along_fraction)
     strength = np.where(is_edge, jump, 0.0)
 
-    if cross_jump_rel is None:
+    el = None
+    if ring_elevation_deg is not None and len(ring_elevation_deg) >= n_rings > 1:
+        el = np.asarray(ring_elevation_deg, dtype=np.float64)
+        if not np.isfinite(el[:n_rings]).all():
+            el = None
+    if cross_jump_rel is None and el is None:
         spacing = ring_spacing_deg if ring_spacing_deg and np.isfinite(ring_spacing_deg) else 0.42
         cross_jump_rel = np.radians(spacing) / np.tan(np.radians(GRAZING_MIN_DEG))
     if cross_ring:
@@ -218,18 +262,27 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         key = seg_of * 8.0 + psi                       # ascending (psi < 2 pi < 8)
         best_jump = np.zeros(n)
         best_far = np.full(n, -1)
-        def across(step):
+        def across(step, with_dpsi=False):
             """Azimuth-nearest return on the ring ``step`` places above (-1) or below (+1)."""
             tgt_pos = pos_of[seg_of] + step
             ok = (tgt_pos >= 0) & (tgt_pos < len(ids))
             tgt = by_el[np.clip(tgt_pos, 0, len(ids) - 1)]
             cand, dpsi = _nearest_in_segment(key, psi, tgt, seg_start[tgt], seg_end[tgt])
-            return cand, ok & (dpsi < gap)
+            ok &= dpsi < gap
+            if t is not None:
+                ok &= np.abs(t[cand] - t) < max_dt
+            return (cand, ok, np.where(tgt_pos >= 0, dpsi, np.inf)) if with_dpsi else (cand, ok)
 
         nb = {step: across(step) for step in ((-2, -1, 1, 2) if edge_support else (-1, 1))}
         for step in (-1, 1):                           # the ring above, then the ring below
             cand, ok = nb[step]
-            thr = np.maximum(cross_jump_m, cross_jump_rel * r)
+            if cross_jump_rel is None:
+                # The elevation gap of this pair of lasers (see GRAZING_MIN_DEG).
+                gap_pair = np.radians(np.abs(el[ring[cand]] - el[ring]))
+                rel = gap_pair / np.tan(np.radians(GRAZING_MIN_DEG))
+            else:
+                rel = cross_jump_rel
+            thr = np.maximum(cross_jump_m, rel * r)
             cj = r[cand] - r
             hit = (ok & (cj > thr) & ~is_edge & ~(on_ground & on_ground[cand])
                    & (cj > best_jump))
@@ -243,7 +296,45 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         idx = np.flatnonzero(best_far >= 0)
         edge_pos[idx] = _between_rays(xyz[idx], xyz[best_far[idx]], r[idx], cross_fraction)
         strength[idx] = best_jump[idx]
+        if edge_contour:
+            # An occluding contour continues: a vertical one (an along-ring edge) on the ring
+            # above or below, a horizontal one (a cross-ring edge) on the neighbouring return
+            # of the ring, at about the same range. Foliage jumps in range at random and its
+            # edges rarely continue; a pole one return wide does.
+            tol = 0.05 * r + 0.1
+            cross = best_far >= 0
+            (up, ok_u), (dn, ok_d) = nb[-1], nb[1]
+            keep_a = ((ok_u & is_edge[up] & (np.abs(r[up] - r) < tol))
+                      | (ok_d & is_edge[dn] & (np.abs(r[dn] - r) < tol)))
+            keep_c = ((ok_n & cross[nxt] & (np.abs(r[nxt] - r) < tol))
+                      | (ok_p & cross[prv] & (np.abs(r[prv] - r) < tol)))
+            is_edge &= keep_a
+            cross &= keep_c
+            idx = np.flatnonzero(cross)
         is_edge[idx] = True
+        if sky_edges and el is not None:
+            # The top of an object against the sky: the laser just above returned nothing
+            # near this azimuth (its nearest return, if any, is beyond the azimuth gap), while
+            # the laser below hits the same surface. Placed towards the missing ray like a
+            # cross-ring edge.
+            cand_a, _, dpsi_a = across(-1, with_dpsi=True)
+            adjacent = ring[cand_a] == ring - 1
+            missing = (ring > 0) & ((dpsi_a >= gap) | ~adjacent)
+            below, ok_b = nb[1]
+            tol = 0.05 * r + 0.1
+            sky = missing & ok_b & (np.abs(r[below] - r) < tol) & ~is_edge
+            if edge_support:
+                below2, ok_b2 = nb[2]
+                sky &= ok_b2 & (np.abs(r[below2] - r) < tol)
+            k = np.flatnonzero(sky)
+            if len(k):
+                el_here = np.arctan2(xyz[k, 2], np.hypot(xyz[k, 0], xyz[k, 1]))
+                el_to = el_here + cross_fraction * np.radians(el[ring[k] - 1] - el[ring[k]])
+                edge_pos[k] = np.column_stack([np.cos(el_to) * np.cos(psi[k]),
+                                               np.cos(el_to) * np.sin(psi[k]),
+                                               np.sin(el_to)]) * r[k, None]
+                strength[k] = 0.0
+                is_edge[k] = True
 
     # Reflectance edges on one surface (no depth jump): each neighbour pair once.
     same_surface = ok_n & (np.abs(r[nxt] - r) < np.maximum(0.2, 0.03 * r))

@@ -130,7 +130,7 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     """
     img = image_features(frame.image, features.blur_sigma, features.canny_low,
                          features.canny_high, objective.truncation_px, features.min_edge_px,
-                         mask=frame.mask)
+                         mask=frame.mask, relative=features.canny_relative)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.
@@ -143,6 +143,10 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     lf: LidarFeatures = lidar_features(
         pts_s[near], ring=rings.ring[near],
         ring_spacing_deg=float(np.nanmedian(spacing)) if np.isfinite(spacing).any() else None,
+        ring_elevation_deg=rings.elevation_deg if rings.n_rings > 1 else None,
+        time=None if frame.time is None else frame.time[near],
+        sweep_s=None if frame.time is None else float(np.ptp(frame.time)),
+        sky_edges=features.sky_edges,
         depth_jump_m=features.depth_jump_m, cross_ring=features.cross_ring,
         cross_jump_m=features.cross_jump_m, cross_jump_rel=features.cross_jump_rel,
         ground_tol_m=features.ground_tol_m,
@@ -150,7 +154,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
         max_range_m=features.max_range_m,
         smooth_ratio=features.smooth_ratio if objective.contrast > 0 else 0.0,
         ring_method=features.ring_method, along_fraction=features.along_fraction,
-        cross_fraction=features.cross_fraction, edge_support=features.edge_support, rng=rng)
+        cross_fraction=features.cross_fraction, edge_support=features.edge_support,
+        edge_contour=features.edge_contour, rng=rng)
     xyz_all = lf.xyz
     if frame.sensor_pose is not None:
         P = np.asarray(frame.sensor_pose, dtype=np.float64)

@@ -90,6 +90,7 @@ def _eps_values(F: np.ndarray, count: int) -> np.ndarray:
     """``count`` cost limits spread geometrically over the front's f2 range (above its minimum)."""
     lo, hi = float(F[:, 1].min()), float(F[:, 1].max())
     floor = max(lo, 1e-3) if hi > 1e-3 else 1e-3
+    hi = max(hi, floor)                      # a front of one solution at the cheapest cost
     return np.geomspace(max(floor, hi / 100), hi, count)
 
 
