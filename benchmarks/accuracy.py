@@ -27,7 +27,8 @@ Datasets (``--source`` takes any folder ``paretocal`` reads):
   written as generic folders: ``32beam`` / ``16beam`` (every 2nd / 4th ring), ``firing``
   (column-major order), ``shuffled`` (random order), ``vehicle`` (the cloud in a vehicle frame,
   the sensor 1.5 m from its origin; the reference becomes ``T_cam_lidar @ inv(sensor_pose)`` and
-  ``calib.yaml`` gets ``lidar_pose``), ``generic`` (unchanged, as a generic folder); ``a+b``
+  ``calib.yaml`` gets ``lidar_pose``; ``vehicle+nopose`` leaves it out, so the pose is
+  estimated from the sweep), ``generic`` (unchanged, as a generic folder); ``a+b``
   applies ``a`` then ``b``. Each variant is a dataset of its own, with the same trial seeds.
 
 The figures the project reports (``DATA`` is the sample data folder, ``../shared/data``):
@@ -45,8 +46,9 @@ The figures the project reports (``DATA`` is the sample data folder, ``../shared
     .venv/bin/python benchmarks/accuracy.py --source DATA/aimotive/left_fisheye \\
         --trials 10 --rot 10 --trans 0.25 --json runs/acc_aim_fisheye_10.json
     # KITTI rig variants, 20 frames, +-5 deg / +-0.2 m, 5 trials each
-    .venv/bin/python benchmarks/accuracy.py --variant 32beam,16beam,firing,shuffled,vehicle \\
-        --trials 5 --rot 5 --trans 0.2 --json runs/acc_variants_5.json
+    .venv/bin/python benchmarks/accuracy.py \\
+        --variant 32beam,16beam,firing,shuffled,vehicle,vehicle+nopose --trials 5 \\
+        --rot 5 --trans 0.2 --json runs/acc_variants_5.json
     # KITTI raw drive, 2 frames (0 and 10), +-3 deg / +-0.1 m, 10 trials
     .venv/bin/python benchmarks/accuracy.py --frames 0,10 --trials 10 --rot 3 --trans 0.1 \\
         --json runs/acc_kitti_2frames_3.json
@@ -103,10 +105,11 @@ def _variant_steps():
         "firing": lambda v, k: T.firing_order(v),
         "shuffled": lambda v, k: T.shuffled(v, k),
         "vehicle": lambda v, k: T.to_vehicle_frame(v),
+        "nopose": lambda v, k: v,
     }
 
 
-VARIANTS = ("generic", "32beam", "16beam", "firing", "shuffled", "vehicle")
+VARIANTS = ("generic", "32beam", "16beam", "firing", "shuffled", "vehicle", "nopose")
 
 
 def parse_variants(values: list[str] | None) -> list[str]:
@@ -176,7 +179,7 @@ def build_variant(source: Path, name: str, dst: Path, frames: str | None = None,
     calib = {"camera": {"model": "pinhole", "K": _rows(cam.K), "width": int(cam.width),
                         "height": int(cam.height)},
              "T_cam_lidar": _rows(T_ref)}
-    if not np.allclose(pose, np.eye(4)):
+    if not np.allclose(pose, np.eye(4)) and "nopose" not in name.split("+"):
         calib["lidar_pose"] = _rows(pose)
     header = (f"# KITTI frames of {Path(source).resolve()} as rig variant '{name}'\n"
               "# (paretocal.testing); T_cam_lidar is KITTI's reference in the cloud's frame.\n")

@@ -281,6 +281,74 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     return out, info
 
 
+def warn_unlocated(frames: list[Frame], info: dict) -> None:
+    """Tell the user when the LiDAR's pose is needed and could not be found (``info`` from
+    :func:`locate_lidar`); called after the input checks so that bad input reads one line."""
+    if info.get("source") != "unknown":
+        return
+    log.warning("%s: the returns do not lie on rings about the cloud's origin and the LiDAR's "
+                "pose could not be estimated (%s); rings and edges are taken about the cloud's "
+                "origin and may be poor: give lidar_pose in calib.yaml", frames[0].points_path,
+                info.get("reason", ""))
+
+
+def locate_lidar(frames: list[Frame], settings: Settings) -> tuple[list[Frame], dict]:
+    """The LiDAR's pose in the clouds' frame: given, not needed, or estimated from a sweep.
+
+    Ring geometry is taken about the sensor's own origin and axis. A pose in calib.yaml
+    (``lidar_pose``) is used as given; a cloud with a ring field, or whose rings fit the line
+    model about its own origin, needs none. Otherwise (a cloud stored in a vehicle frame) the
+    pose is estimated from the first sweep
+    (:func:`~paretocal.features.sensor.estimate_sensor_pose`) and, when the rings fit the line
+    model in the estimated frame, given to every frame (one rig, one mount).
+
+    Returns
+    -------
+    frames : list of Frame
+        With ``sensor_pose`` set when it was estimated.
+    info : dict
+        ``source``: "calib.yaml", "ring field", "cloud origin", "estimated" or "unknown",
+        with the estimate's summary and the rings' purity where they were checked.
+    """
+    import dataclasses
+
+    from .features.rings import MIN_RINGS
+    from .features.sensor import estimate_sensor_pose
+
+    if any(f.sensor_pose is not None for f in frames):
+        return frames, {"source": "calib.yaml"}
+    if settings.features.ring_method in ("field", "scan", "elevation"):
+        return frames, {"source": "cloud origin", "note": "ring method "
+                        f"{settings.features.ring_method!r} asked for"}
+    first = frames[0]
+    if first.ring is not None:
+        return frames, {"source": "ring field"}
+    rng = np.random.default_rng(np.random.SeedSequence([settings.search.seed, 2]))
+    here = frame_rings(first, settings.features, rng)
+    if here.purity >= MIN_PURITY and here.n_rings >= MIN_RINGS:
+        return frames, {"source": "cloud origin", "purity": round(float(here.purity), 4)}
+    est = estimate_sensor_pose(first.points, rng)
+    if est is None or not est.ok:
+        why = "no ground plane to start from" if est is None else "; ".join(est.notes)
+        return frames, {"source": "unknown", "purity_at_origin": round(float(here.purity), 4),
+                        "estimate": None if est is None else est.summary(), "reason": why}
+    moved = [dataclasses.replace(f, sensor_pose=est.pose) for f in frames]
+    there = frame_rings(moved[0], settings.features, rng)
+    info = {"source": "estimated", "estimate": est.summary(),
+            "purity_at_origin": round(float(here.purity), 4),
+            "purity": round(float(there.purity), 4), "n_rings": int(there.n_rings)}
+    if there.purity < MIN_PURITY or there.n_rings < MIN_RINGS:
+        info.update(source="unknown", reason="the rings do not fit the line model in the "
+                    "estimated frame either")
+        return frames, info
+    p = est.pose[:3, 3]
+    log.info("%s: the LiDAR's pose was estimated from the sweep: at (%.2f, %.2f, %.2f) m in "
+             "the cloud's frame, axis tilted %.2f deg (%d rings, purity %.3f); give "
+             "lidar_pose in calib.yaml to set it", first.points_path, p[0], p[1], p[2],
+             est.tilt_deg, there.n_rings, there.purity)
+    return moved, info
+
+
 def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
     """The rings of every frame's sweep (see :func:`~paretocal.features.prepare.frame_rings`);
     :func:`warn_rings` tells the user about the implausible ones."""
@@ -564,6 +632,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
+    frames, lidar_info = locate_lidar(frames, settings)
+    timings["lidar_pose"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     # Rings from the sweeps as recorded (each return on its laser's cone about the sensor);
     # everything else from the sweeps de-skewed to the image time.
     rings = sweep_rings(frames, settings)
@@ -573,6 +644,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     timings["motion"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     stage = _Stage(frames, T_init, T_init, settings, report("features"), rings)
+    warn_unlocated(frames, lidar_info)
     warn_rings(frames, rings)
     feats, scene, objective, cost_model = stage.feats, stage.scene, stage.objective, stage.cost
     n_min, n_max = stage.n_min, stage.n_max
@@ -669,6 +741,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         nsga_front=(res.X, res.F), quality=quality, objective=objective, seed_poses=seeds)
     result.motion = motion_info
     result.inputs = _inputs(frames)
+    result.inputs["lidar_pose_source"] = lidar_info
     result.sweeps = frames
     result.reliability = reliability(result)
     if result.reliability["verdict"] != "ok":

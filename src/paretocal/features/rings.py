@@ -26,9 +26,16 @@ Methods (``method`` of :func:`recover_rings`):
   every scan-order ring fits its line; else ``lines``.
 
 Every method's result is checked against the line model (:func:`ring_purity`): the share of
-points within tolerance of their ring's line. The geometry is taken about the sensor origin:
-clouds stored in another frame must be brought into the sensor frame first (see
-:mod:`paretocal.features.sensor`).
+points within tolerance of their ring's line, and 0 for a ring set that cannot be a spinning
+multi-beam LiDAR's (fewer than :data:`MIN_RINGS` rings, or "rings" that scatter across the gaps
+between them); ``Rings.notes`` say when a result is not plausible. The geometry is taken about
+the sensor origin: clouds stored in another frame must be brought into the sensor frame first
+(see :mod:`paretocal.features.sensor`); about a wrong origin the returns scatter off their
+lines and the result is not plausible.
+
+The rings of one sensor keep their lines from sweep to sweep: ``recover_rings(..., model=r)``
+labels a sweep with an earlier sweep's line model (:func:`rings_from_model`) and runs the full
+``lines`` recovery only when that does not fit.
 """
 
 from __future__ import annotations
@@ -43,6 +50,9 @@ log = logging.getLogger(__name__)
 
 #: More rings than any spinning LiDAR has (the largest have 128): a sign of a wrong method.
 MAX_RINGS = 256
+#: Fewer rings than any spinning multi-beam LiDAR has (the smallest have 8, most 16 to 128):
+#: a ring set with fewer is a few lasers' returns lumped together, whatever their fit.
+MIN_RINGS = 8
 #: Returns closer to the axis than this (m) are ignored for fitting (sensor housing, roof).
 MIN_AXIS_DISTANCE_M = 0.5
 #: Hough grid: ``a`` bins (tan elevation) and height offsets ``h`` (m). The a bin (0.011 deg)
@@ -67,6 +77,10 @@ MERGE_SIGMA = 10.0
 MERGE_GAP_SHARE = 0.1
 #: A ring set is plausible when most points lie within tolerance of their ring's line.
 MIN_PURITY = 0.9
+#: A point within this share of the gap to the next ring lies on its ring, however sharp the
+#: ring: coordinates stored to 1 mm give rings sigmas of 1e-5, a 300th of their gap, and
+#: their returns' tails reach beyond 5 such sigmas.
+PURITY_GAP_FLOOR = 0.1
 #: Rings are numbered by their elevation seen at this horizontal distance (m): lasers with
 #: different height offsets can swap order between near and far, and "the ring above" should
 #: mean the geometric neighbour where most edges are found.
@@ -221,31 +235,82 @@ def _sigma(r: np.ndarray) -> float:
     return float(1.4826 * np.median(r)) + 1e-7 if len(r) else 1e-7
 
 
+def _group_lines(te: np.ndarray, inv: np.ndarray, lab: np.ndarray,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares ``te = a + h inv`` of every label at once: ``a``, ``h`` and the count,
+    shapes (n,). As :func:`_fit_line`: h is 0 for a label whose points span no range of
+    distances; a and h are NaN for labels without points."""
+    count = np.bincount(lab, minlength=n).astype(np.float64)
+    safe = np.maximum(count, 1.0)
+    m_inv = np.bincount(lab, inv, n) / safe
+    m_te = np.bincount(lab, te, n) / safe
+    di = inv - m_inv[lab]                     # centred per label (no cancellation)
+    sxx = np.bincount(lab, di * di, n)
+    sxy = np.bincount(lab, di * (te - m_te[lab]), n)
+    hi = np.full(n, -np.inf)
+    lo = np.full(n, np.inf)
+    np.maximum.at(hi, lab, inv)
+    np.minimum.at(lo, lab, inv)
+    spread = (count >= 2) & (hi - lo >= 1e-6) & (sxx > 0)
+    h = np.where(spread, sxy / np.where(spread, sxx, 1.0), 0.0)
+    a = m_te - h * m_inv
+    empty = count == 0
+    a[empty] = np.nan
+    h[empty] = np.nan
+    return a, h, count
+
+
+def _group_sigma(r: np.ndarray, lab: np.ndarray, n: int) -> np.ndarray:
+    """:func:`_sigma` of the absolute residuals ``r`` of every label, shape (n,) (NaN for
+    labels without points)."""
+    out = np.full(n, np.nan)
+    if len(r) == 0:
+        return out
+    order = np.lexsort((r, lab))
+    rs, ls = r[order], lab[order]
+    starts = np.flatnonzero(np.r_[True, ls[1:] != ls[:-1]])
+    count = np.diff(np.r_[starts, len(rs)])
+    med = 0.5 * (rs[starts + (count - 1) // 2] + rs[starts + count // 2])
+    out[ls[starts]] = 1.4826 * med + 1e-7
+    return out
+
+
 def fit_ring_lines(te: np.ndarray, inv: np.ndarray, labels: np.ndarray,
                    n_rings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Fit each labelled ring's line robustly.
+    """Fit each labelled ring's line robustly: a least-squares line, then again on the points
+    within :data:`LINE_TOL_SIGMA` robust sigmas of it. All rings at once (no loop over rings).
 
-    Returns ``a``, ``h``, ``sigma`` of shape (n_rings,) (NaN for rings with fewer than two
-    points).
+    Parameters
+    ----------
+    te, inv : ndarray, shape (N,)
+        ``z / d`` and ``1 / d`` per point.
+    labels : ndarray, shape (N,), int
+        Ring per point, 0 .. n_rings - 1.
+    n_rings : int
+
+    Returns
+    -------
+    a, h, sigma : ndarray, shape (n_rings,)
+        The lines ``te = a + h inv`` and their robust scatter; NaN for rings with fewer than
+        two points.
     """
-    a = np.full(n_rings, np.nan)
-    h = np.full(n_rings, np.nan)
-    s = np.full(n_rings, np.nan)
-    order = np.argsort(labels, kind="stable")
-    lab = labels[order]
-    bounds = np.searchsorted(lab, np.arange(n_rings + 1))
-    for k in range(n_rings):
-        idx = order[bounds[k]:bounds[k + 1]]
-        if len(idx) < 2:
-            continue
-        ak, hk = _fit_line(te[idx], inv[idx])
-        r = np.abs(te[idx] - ak - hk * inv[idx])
-        sk = _sigma(r)
-        inl = r < LINE_TOL_SIGMA * sk
-        if inl.sum() >= 2:
-            ak, hk = _fit_line(te[idx][inl], inv[idx][inl])
-            sk = _sigma(np.abs(te[idx][inl] - ak - hk * inv[idx][inl]))
-        a[k], h[k], s[k] = ak, hk, sk
+    lab = np.asarray(labels, dtype=np.int64)
+    nan = np.full(n_rings, np.nan)
+    if n_rings == 0 or len(lab) == 0:
+        return nan, nan.copy(), nan.copy()
+    a1, h1, count = _group_lines(te, inv, lab, n_rings)
+    r = np.abs(te - a1[lab] - h1[lab] * inv)
+    s1 = _group_sigma(r, lab, n_rings)
+    inl = r < LINE_TOL_SIGMA * s1[lab]
+    a2, h2, count2 = _group_lines(te[inl], inv[inl], lab[inl], n_rings)
+    s2 = _group_sigma(np.abs(te[inl] - a2[lab[inl]] - h2[lab[inl]] * inv[inl]), lab[inl],
+                      n_rings)
+    refit = count2 >= 2
+    a = np.where(refit, a2, a1)
+    h = np.where(refit, h2, h1)
+    s = np.where(refit, s2, s1)
+    few = count < 2
+    a[few], h[few], s[few] = np.nan, np.nan, np.nan
     return a, h, s
 
 
@@ -254,9 +319,12 @@ def ring_purity(points: np.ndarray, ring: np.ndarray) -> float:
     fitted line; points without a ring (-1) count as impure.
 
     The tolerance is a line's own scatter (:data:`LINE_TOL_SIGMA` sigmas, never below the
-    typical ring's) but at most a quarter of the gap to the neighbouring rings: a "ring" that
-    mixes several lasers has a large scatter and nearly coincident neighbours, so its points
-    do not count however widely they scatter.
+    typical ring's, nor below :data:`PURITY_GAP_FLOOR` of the gap to the neighbouring rings)
+    but at most a quarter of that gap. A ring set is
+    only pure when it is one of a spinning multi-beam LiDAR: fewer than :data:`MIN_RINGS`
+    rings give 0, and a ring whose tolerance band (:data:`LINE_TOL_SIGMA` of its own sigmas)
+    reaches past the middle of the gap to its neighbour is no laser's ring (a "ring" that mixes
+    several lasers scatters across their gaps) and its points count as impure.
     """
     te, inv, ok = _line_coords(np.asarray(points, dtype=np.float64))
     ring = np.asarray(ring)
@@ -267,7 +335,7 @@ def ring_purity(points: np.ndarray, ring: np.ndarray) -> float:
     lab = ring[sel]
     a, h, s = fit_ring_lines(te[sel], inv[sel], lab, n)
     good = np.isfinite(a)
-    if good.sum() < 2:
+    if good.sum() < MIN_RINGS:
         return 0.0
     typical = float(np.median(inv[sel]))
     at = np.where(good, a + np.nan_to_num(h) * typical, np.nan)
@@ -275,9 +343,11 @@ def ring_purity(points: np.ndarray, ring: np.ndarray) -> float:
     gaps = np.diff(at[order])
     spacing = np.full(n, np.nan)
     spacing[order] = np.minimum(np.r_[np.inf, gaps], np.r_[gaps, np.inf])
-    tol = np.minimum(LINE_TOL_SIGMA * np.maximum(s, np.nanmedian(s)), 0.25 * spacing)
+    sharp = good & (LINE_TOL_SIGMA * np.nan_to_num(s, nan=np.inf) < 0.5 * np.nan_to_num(spacing))
+    tol = np.minimum(np.maximum(LINE_TOL_SIGMA * np.maximum(s, np.nanmedian(s)),
+                                PURITY_GAP_FLOOR * spacing), 0.25 * spacing)
     r = np.abs(te[sel] - a[lab] - h[lab] * inv[sel])
-    inside = good[lab] & (r < np.nan_to_num(tol[lab], nan=0.0))
+    inside = sharp[lab] & (r < np.nan_to_num(tol[lab], nan=0.0))
     return float(inside.sum() / ok.sum())
 
 
@@ -470,8 +540,66 @@ def rings_from_lines(points: np.ndarray, rng: np.random.Generator | int | None =
     rank = np.empty(len(order), dtype=np.int32)
     rank[order] = np.arange(len(order), dtype=np.int32)
     ring[idx[within]] = rank[lab[within]]
-    purity = float(within.mean()) * len(idx) / max(ok.sum(), 1)
-    return Rings(ring, len(a), a[order], h[order], "lines", purity)
+    # Judged like every other method's labels: lines found in the wrong frame explain their
+    # own points (their tolerance grows with their scatter) but are no laser's rings.
+    return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring))
+
+
+#: k-lines passes when a sweep is labelled with a previous sweep's line model: the rings of
+#: one sensor move by less than their scatter between sweeps, so two passes settle them.
+MODEL_PASSES = 2
+
+
+def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
+    """Label a sweep with the line model of an earlier sweep of the same sensor.
+
+    Every point takes the nearest of the model's lines ``(a_k, h_k)``, the lines are refitted
+    to their points (:data:`MODEL_PASSES` k-lines passes; a line without points in this sweep
+    keeps the model's), and the points within tolerance of their line keep its ring. The ring
+    numbers are the model's where the lines keep their order. Much cheaper than
+    :func:`rings_from_lines` (no Hough transform); judge the result by its ``purity``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3+)
+        The sweep in the sensor frame (metres).
+    model : Rings
+        An earlier sweep's rings (its ``tan_elevation`` and ``offset_m``).
+
+    Returns
+    -------
+    Rings
+        With ``method`` "lines".
+    """
+    pts = np.asarray(points, dtype=np.float64)[:, :3]
+    te, inv, ok = _line_coords(pts)
+    idx = np.flatnonzero(ok)
+    ring = np.full(len(pts), -1, dtype=np.int32)
+    a = np.asarray(model.tan_elevation, dtype=np.float64)
+    h = np.nan_to_num(np.asarray(model.offset_m, dtype=np.float64))
+    keep = np.isfinite(a)
+    a, h = a[keep], h[keep]
+    if len(a) == 0 or len(idx) == 0:
+        return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
+                     ["the line model has no rings" if len(a) == 0 else
+                      f"no returns beyond {MIN_AXIS_DISTANCE_M} m of the axis"])
+    ti, ii = te[idx], inv[idx]
+    s = np.full(len(a), np.nan)
+    for _ in range(MODEL_PASSES):
+        lab, _ = nearest_line(ti, ii, a, h)
+        an, hn, sn = fit_ring_lines(ti, ii, lab, len(a))
+        fitted = np.isfinite(an)
+        a, h, s = np.where(fitted, an, a), np.where(fitted, hn, h), np.where(fitted, sn, s)
+    lab, res = nearest_line(ti, ii, a, h)
+    s_typ = float(np.nanmedian(s)) if np.isfinite(s).any() else 0.0
+    tol = LINE_TOL_SIGMA * np.maximum(np.nan_to_num(s, nan=s_typ), s_typ)
+    within = res < tol[lab] * 2.0
+    order = ring_order(a, h)
+    rank = np.empty(len(order), dtype=np.int32)
+    rank[order] = np.arange(len(order), dtype=np.int32)
+    ring[idx[within]] = rank[lab[within]]
+    return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring),
+                 ["labelled with the line model of an earlier sweep"])
 
 
 # --- choosing a method ---------------------------------------------------------------------------
@@ -497,7 +625,8 @@ def _as_rings(points: np.ndarray, ring: np.ndarray, method: str, notes=()) -> Ri
 
 
 def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarray | None = None,
-                  rng: np.random.Generator | int | None = 0, source: str = "") -> Rings:
+                  rng: np.random.Generator | int | None = 0, source: str = "",
+                  model: Rings | None = None) -> Rings:
     """Rings of one sweep (see the module docstring for ``method``).
 
     Parameters
@@ -511,11 +640,18 @@ def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarr
         For the ``lines`` method's subsample.
     source : str
         The file, named in notes and warnings.
+    model : Rings, optional
+        The rings of an earlier sweep of the same sensor (in its sensor frame). Where the
+        ``lines`` method would run, the sweep is first labelled with this line model
+        (:func:`rings_from_model`, about 10 times cheaper); the full recovery runs only when
+        that result is not plausible (fewer than :data:`MIN_RINGS` rings or purity below
+        :data:`MIN_PURITY`).
 
     Returns
     -------
     Rings
-        ``notes`` says what was tried and why the result was chosen.
+        ``notes`` says what was tried and why the result was chosen, and says so when the
+        result is not a plausible ring set.
     """
     if method not in ("auto", "field", "scan", "lines", "elevation"):
         raise ValueError(f"unknown ring method {method!r}")
@@ -524,24 +660,47 @@ def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarr
     pts = np.asarray(points, dtype=np.float64)[:, :3]
     if method in ("auto", "field") and ring_field is not None:
         r = _as_rings(pts, ring_field, "field")
-        if method == "field" or (2 <= r.n_rings <= MAX_RINGS and r.purity >= MIN_PURITY):
-            return r
+        if method == "field" or (MIN_RINGS <= r.n_rings <= MAX_RINGS
+                                  and r.purity >= MIN_PURITY):
+            return _noted(r, where)
         notes.append(f"{where}the ring field gives {r.n_rings} rings with purity "
                      f"{r.purity:.2f} (below {MIN_PURITY}); rings recovered from the geometry "
                      "instead")
     elif method == "field":
         raise ValueError("ring method 'field' needs a ring field")
     if method == "elevation":
-        return _as_rings(pts, rings_from_elevation(pts), "elevation")
+        return _noted(_as_rings(pts, rings_from_elevation(pts), "elevation"), where)
     if method in ("auto", "scan"):
         scan = rings_from_scan_order(pts)
         n = int(scan.max()) + 1
         if method == "scan":
-            return _as_rings(pts, scan, "scan")
-        if 2 <= n <= MAX_RINGS:
+            return _noted(_as_rings(pts, scan, "scan"), where)
+        if MIN_RINGS <= n <= MAX_RINGS:
             r = _as_rings(pts, scan, "scan", notes)
             if r.purity >= MIN_PURITY:
                 return r
+    if model is not None:
+        r = rings_from_model(pts, model)
+        if r.n_rings >= MIN_RINGS and r.purity >= MIN_PURITY:
+            r.notes = notes + r.notes
+            return r
+        notes.append(f"{where}the earlier sweep's line model gives {r.n_rings} rings with "
+                     f"purity {r.purity:.2f}; rings recovered from this sweep instead")
     r = rings_from_lines(pts, rng)
     r.notes = notes + r.notes
+    return _noted(r, where)
+
+
+def _noted(r: Rings, where: str = "") -> Rings:
+    """``r`` with a note when it is no plausible ring set of a spinning multi-beam LiDAR."""
+    if 0 < r.n_rings < MIN_RINGS:
+        r.notes.append(f"{where}only {r.n_rings} rings, fewer than any spinning multi-beam "
+                       f"LiDAR has ({MIN_RINGS}): not the sensor's rings (points not in the "
+                       "sensor frame?)")
+    elif r.n_rings == 0:
+        r.notes.append(f"{where}no rings found")
+    if r.purity < MIN_PURITY:
+        r.notes.append(f"{where}{r.n_rings} rings with purity {r.purity:.2f} (below "
+                       f"{MIN_PURITY}): the points do not lie on the rings' lines (rings mixed, "
+                       "or points not in the sensor frame)")
     return r
