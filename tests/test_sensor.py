@@ -97,3 +97,14 @@ def test_aimotive_pose_from_the_sweep(data):
     truth[:3, 3] = [1.1574, 0.0013, 1.6823]
     angle, offset = _axis_errors(est, truth)
     assert angle < 0.05 and offset < 0.02
+
+
+@pytest.mark.parametrize("seed", [5, 8])
+def test_an_unlucky_subsample_is_retried(raw_frames, seed):
+    # Frame 8 in firing order: with these seeds the first subsample centres the ground rings
+    # wrongly (61 % and 53 % of the returns explained); the retry finds the pose.
+    w = to_vehicle_frame(firing_order(kitti_truth(raw_frames[8].points)))
+    est = estimate_sensor_pose(w.points, rng=seed)
+    assert est.ok
+    angle, offset = _axis_errors(est, w.sensor_pose)
+    assert angle < 0.05 and offset < 0.02

@@ -117,6 +117,8 @@ NEW_LINE_SAMPLE = 15000
 #: The estimate is trusted when at least this share of the returns lie on its lines (0.93 to
 #: 0.99 on real sweeps in the right frame; below 0.3 about a wrong axis).
 MIN_EXPLAINED = 0.8
+#: Estimates from fresh subsamples before giving up (a failed one costs about a second).
+ATTEMPTS = 3
 
 
 @dataclass
@@ -603,6 +605,10 @@ def estimate_sensor_pose(points: np.ndarray,
                          rng: np.random.Generator | int | None = 0) -> SensorPoseEstimate | None:
     """Estimate the LiDAR's pose in the cloud's frame from one sweep (module docstring).
 
+    The rough stages work on random subsamples, and an unlucky one can put the ground rings'
+    centre in the wrong place; the line model then explains too little and the estimate is
+    made again from fresh subsamples, up to :data:`ATTEMPTS` times (the best one is returned).
+
     Parameters
     ----------
     points : ndarray, shape (N, 3+)
@@ -617,6 +623,19 @@ def estimate_sensor_pose(points: np.ndarray,
     whose lines do not explain the sweep comes back with ``ok`` False.
     """
     rng = np.random.default_rng(rng)
+    best = None
+    for _ in range(ATTEMPTS):
+        est = _estimate_once(points, rng)
+        if est is None or est.ok:
+            return est
+        if best is None or est.explained > best.explained:
+            best = est
+    return best
+
+
+def _estimate_once(points: np.ndarray,
+                   rng: np.random.Generator) -> SensorPoseEstimate | None:
+    """One estimate from one set of subsamples (see :func:`estimate_sensor_pose`)."""
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] < 3:
         return None
