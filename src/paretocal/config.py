@@ -39,7 +39,7 @@ class FeatureSettings:
     along_fraction: float = 0.5      #: edge placement between near and far ray, along a ring
     cross_fraction: float = 0.25     #: the same across rings (see README, Method)
     edge_support: bool = False       #: keep depth edges only where the near side is a surface
-    edge_contour: bool = True        #: keep depth edges only where their contour continues
+    edge_contour: bool = False       #: keep depth edges only where their contour continues
     sky_edges: bool = False          #: also edges at the top of objects against the sky
     intensity_jump: float = 0.5      #: intensity jump for an intensity edge (x the 99th pct)
     min_range_m: float = 1.5
