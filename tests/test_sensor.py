@@ -108,3 +108,19 @@ def test_an_unlucky_subsample_is_retried(raw_frames, seed):
     assert est.ok
     angle, offset = _axis_errors(est, w.sensor_pose)
     assert angle < 0.05 and offset < 0.02
+
+
+def test_a_pose_that_cannot_be_found_is_said(raw_frames, sweep, monkeypatch, caplog):
+    import paretocal.features.sensor as sensor
+    from paretocal.pipeline import warn_unlocated
+
+    w = to_vehicle_frame(sweep)
+    moved = [replace(raw_frames[0], points=w.points, ring=None, sensor_pose=None)]
+    monkeypatch.setattr(sensor, "estimate_sensor_pose", lambda *a, **k: None)
+    out, info = locate_lidar(moved, Settings())
+    assert info["source"] == "unknown" and out[0].sensor_pose is None
+    assert info["purity_at_origin"] < MIN_PURITY and "ground plane" in info["reason"]
+    with caplog.at_level("WARNING", logger="paretocal"):
+        warn_unlocated(moved, info)
+    assert any(str(moved[0].points_path) in r.getMessage() and "lidar_pose" in r.getMessage()
+               for r in caplog.records)
