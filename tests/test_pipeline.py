@@ -50,6 +50,12 @@ class TestResult:
         lo, hi = doc["n_range"]
         assert lo <= doc["n_points"] <= hi
         assert doc["reference_error"]["rotation_deg"] >= 0
+        # What the inputs offered: KITTI .bin sweeps, rings in scan order about the origin.
+        assert doc["inputs"]["lidar_pose_source"]["source"] == "cloud origin"
+        rings = doc["inputs"]["rings"]
+        assert [r["frame"] for r in rings] == [f.name for f in result.sweeps]
+        assert all(r["n_rings"] == 64 and r["method"] == "scan" and r["purity"] > 0.99
+                   for r in rings)
 
     def test_front_is_non_dominated_and_sorted_by_cost(self, result):
         F = result.front.F

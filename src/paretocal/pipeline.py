@@ -742,6 +742,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     result.motion = motion_info
     result.inputs = _inputs(frames)
     result.inputs["lidar_pose_source"] = lidar_info
+    result.inputs["rings"] = [{"frame": f.name, "method": r.method, "n_rings": int(r.n_rings),
+                               "purity": round(float(r.purity), 4)}
+                              for f, r in zip(frames, rings)]
     result.sweeps = frames
     result.reliability = reliability(result)
     if result.reliability["verdict"] != "ok":
