@@ -71,3 +71,22 @@ def test_purity_rejects_mixed_rings(sweeps):
     assert ring_purity(v.points, v.ring) > 0.99
     # Two lasers in one "ring" (every ring merged with its neighbour) fail the line model.
     assert ring_purity(v.points, v.ring // 2) < 0.6
+
+
+def test_implausible_rings_are_said_with_the_file_and_the_fallback(sweeps, raw_frames, caplog):
+    from dataclasses import replace
+
+    from paretocal.pipeline import warn_rings
+
+    # About a wrong origin (a vehicle frame without lidar_pose) the recovered rings fail the
+    # line model: one warning names the file, says the rings are still used with poor depth
+    # edges, and asks for the pose.
+    v = to_vehicle_frame(sweeps[0])
+    frame = replace(raw_frames[0], points=v.points, ring=None, sensor_pose=None)
+    r = recover_rings(v.points, source=str(frame.points_path))
+    assert r.purity < MIN_PURITY or r.n_rings < 8
+    with caplog.at_level("WARNING", logger="paretocal"):
+        warn_rings([frame], [r])
+    text = [rec.getMessage() for rec in caplog.records]
+    assert any(str(frame.points_path) in t and "lidar_pose" in t and "unreliable" in t
+               for t in text), text
