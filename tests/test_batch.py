@@ -4,6 +4,7 @@ recorded and does not stop the others; a rerun skips what is done."""
 from __future__ import annotations
 
 import csv
+import json
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -52,6 +53,10 @@ def test_batch_records_failures_and_resumes(manifest, tmp_path):
         assert float(row["drift_rotation_deg"]) > 0.1          # the start was 1.5 deg off
         assert row["check_verdict"] in ("calibrated", "miscalibrated")
         assert float(row["ref_rotation_deg"]) >= 0
+        # The run's own verdict, as in its result.json.
+        doc = json.loads((out / "runs" / eid / "result.json").read_text())
+        assert row["reliability"] == doc["reliability"]["verdict"]
+        assert row["reliability_reason"] == "; ".join(doc["reliability"]["reasons"])
     # Different worker processes ran the two good entries (2 workers, 1 task each at a time,
     # unless one finished before the other started); at least the records name a worker.
     assert all(rows[e]["worker"] for e in rows)

@@ -65,12 +65,26 @@ class TestCalibrate:
 
     def test_result_can_be_the_next_init(self, tmp_path, raw_date, init_file, capsys):
         a = tmp_path / "a"
-        assert _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", a, *FAST,
-                    "--no-figures")[0] == 0
+        code, stdout, _ = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", a,
+                               *FAST, "--no-figures")
+        assert code == 0
+        # Two frames: the last line gives the verdict and its main reason.
+        assert stdout.strip().splitlines()[-1].startswith(
+            "paretocal: verdict UNRELIABLE: only 2 frame(s)")
         b = tmp_path / "b"
         code, _, err = _run(capsys, "calibrate", raw_date, "--init", a / "extrinsic.yaml",
                             "--out", b, *FAST, "--no-figures")
         assert code == 0, err
+
+    def test_strict_exits_3_on_an_unreliable_result(self, tmp_path, raw_date, init_file,
+                                                    capsys):
+        out = tmp_path / "s"
+        code, stdout, _ = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
+                               *FAST, "--no-figures", "--strict")
+        assert code == 3
+        assert "verdict UNRELIABLE" in stdout.strip().splitlines()[-1]
+        doc = json.loads((out / "result.json").read_text())   # written all the same
+        assert doc["reliability"]["verdict"] == "unreliable"
 
     def test_config_file_and_budget(self, tmp_path, raw_date, init_file, capsys):
         cfg = tmp_path / "cfg.yaml"
@@ -171,3 +185,12 @@ class TestCheck:
     def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
         code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")
         assert code == 2 and "none.yaml: file not found" in err
+
+
+def test_verdict_line_names_the_main_reason_and_counts_the_rest():
+    from paretocal.cli import verdict_line
+
+    assert verdict_line({"verdict": "ok", "reasons": [], "frames": 20}).startswith(
+        "paretocal: verdict OK")
+    line = verdict_line({"verdict": "unreliable", "reasons": ["a", "b", "c"], "frames": 2})
+    assert line == "paretocal: verdict UNRELIABLE: a (and 2 more reasons in result.json)"

@@ -37,7 +37,8 @@ _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
                    "n_points", "drift_rotation_deg", "drift_translation_cm",
                    "ref_rotation_deg", "ref_translation_cm", "chamfer", "ms_per_eval",
-                   "check_verdict", "check_score", "wall_s", "worker"] + \
+                   "reliability", "reliability_reason", "check_verdict", "check_score",
+                   "wall_s", "worker"] + \
                   [f"T_{i}{j}" for i in range(3) for j in range(4)]
 
 
@@ -150,7 +151,8 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         The record written to ``entry.json``: the entry's fields, ``status`` ("ok" or
         "failed"), ``reason``, the chosen ``T_cam_lidar``, ``drift_*`` (how far the
         calibration moved the initial extrinsic), reference errors when known, the check's
-        verdict and score, ``wall_s``.
+        verdict and score, ``reliability`` ("ok" or "unreliable") with ``reliability_reason``
+        (the reasons, joined), ``wall_s``.
     """
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
@@ -195,7 +197,9 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
               "ref_rotation_deg": ref.get("rotation_deg"),
               "ref_translation_cm": ref.get("translation_cm"),
               "chamfer": result.objectives()["chamfer"],
-              "ms_per_eval": result.objectives().get("ms")}
+              "ms_per_eval": result.objectives().get("ms"),
+              "reliability": result.reliability["verdict"],
+              "reliability_reason": "; ".join(result.reliability["reasons"])}
     if check:
         c = check_extrinsic(frames, result.T_init, settings)
         record.update({"check_verdict": c["verdict"], "check_score": c["score"]})
@@ -232,7 +236,7 @@ def write_summary(rows: list[dict], out_dir: Path) -> list[Path]:
     atomic_write_text(out_dir / "summary.csv", buf.getvalue())
     cols = {k: [r.get(k) for r in rows] for k in SUMMARY_COLUMNS}
     for k in ("id", "vehicle", "order", "status", "reason", "source", "frames",
-              "check_verdict"):
+              "reliability", "reliability_reason", "check_verdict"):
         cols[k] = [None if v is None else str(v) for v in cols[k]]
     table = pa.table(cols)
     with atomic_path(out_dir / "summary.parquet") as tmp:

@@ -172,6 +172,9 @@ def calibrate(
     polish: Annotated[Optional[bool], typer.Option("--polish/--no-polish",
                                                     help="Locally polish the front.")] = None,
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Write PNG figures.")] = True,
+    strict: Annotated[bool, typer.Option(
+        "--strict", help="Exit with status 3 when the result is judged unreliable (the outputs "
+                         "are written either way).")] = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
 ) -> None:
@@ -182,7 +185,7 @@ def calibrate(
 
     _setup_logging(verbose, quiet)
     if resume is not None:
-        return _resume(resume, verbose, quiet, checkpoint_every)
+        return _resume(resume, verbose, quiet, checkpoint_every, strict)
     if source is None or out is None:
         raise SettingsError("calibrate needs SOURCE and --out (or --resume RUN_DIR)")
     if checkpoint_every < 0:
@@ -210,7 +213,8 @@ def calibrate(
     check_output_dir(out)
     T_init = read_extrinsic(init) if init is not None else None
     loaded = load_frames(source, settings.frames, settings.camera)
-    _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every)
+    _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
+                     strict)
 
 
 RUN_ARGS = "run_args.json"       # what --resume needs to rebuild the run
@@ -218,7 +222,7 @@ CHECKPOINT = "checkpoint.pkl"
 
 
 def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,
-                     checkpoint_every: int) -> None:
+                     checkpoint_every: int, strict: bool = False) -> None:
     """Calibrate with checkpoints in ``out``; on an interrupt write the partial front."""
     import json
 
@@ -259,9 +263,28 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval; error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
+    typer.echo(verdict_line(result.reliability))
+    if strict and result.reliability["verdict"] != "ok":
+        raise typer.Exit(STRICT_EXIT)
 
 
-def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int) -> None:
+#: Exit status of ``calibrate --strict`` for a result judged unreliable.
+STRICT_EXIT = 3
+
+
+def verdict_line(reliability: dict) -> str:
+    """The CLI's last line: the verdict and its main reason, for a person."""
+    reasons = reliability.get("reasons") or []
+    if reliability.get("verdict") == "ok" or not reasons:
+        return ("paretocal: verdict OK: nothing the run measured casts doubt on the result "
+                f"({reliability.get('frames')} frames)")
+    more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
+            "result.json)" if len(reasons) > 1 else "")
+    return f"paretocal: verdict UNRELIABLE: {reasons[0]}{more}"
+
+
+def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
+            strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
     import json
 
@@ -283,7 +306,7 @@ def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int) ->
         log.warning("%s: no checkpoint; the run starts over", run_dir)
     loaded = load_frames(source, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, run_dir, figures, quiet,
-                     max(checkpoint_every, 1))
+                     max(checkpoint_every, 1), strict)
 
 
 @app.command()
