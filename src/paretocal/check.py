@@ -34,8 +34,10 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     dict
         ``verdict`` ("calibrated" or "miscalibrated"), ``score`` (the move to the local optimum
         relative to the tolerances; above 1 is miscalibrated), ``moved`` (deg, cm, px),
-        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_local_optimum`` and the
-        ``quality`` report at the local optimum.
+        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_local_optimum``, the
+        ``quality`` report at the local optimum, and ``weak`` with ``notes``: True when the
+        check itself has too little to go on (fewer frames than a calibration needs to be
+        trusted), with what to do.
     """
     from .pipeline import _Stage
 
@@ -61,7 +63,16 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     score = max(moved["rotation_deg"] / rot_tol_deg, moved["translation_cm"] / trans_tol_cm)
     quality = quality_report(obj, xo)
     tick("check", 3, 3)
+    from .pipeline import RELIABLE_MIN_FRAMES
+
+    notes = []
+    if len(frames) < RELIABLE_MIN_FRAMES:
+        notes.append(f"only {len(frames)} frame(s): the check itself is weak (one scene's "
+                     "biases can move a correct extrinsic or hold a wrong one); check on at "
+                     f"least {RELIABLE_MIN_FRAMES} frames of varied scenes")
     return {
+        "weak": bool(notes),
+        "notes": notes,
         "verdict": "miscalibrated" if score > 1.0 else "calibrated",
         "score": float(score),
         "tolerances": {"rotation_deg": rot_tol_deg, "translation_cm": trans_tol_cm},

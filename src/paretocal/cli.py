@@ -383,6 +383,8 @@ def check(
                f"{m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / {m['pixels']:.1f} px "
                f"away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
                f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
+    for note in r["notes"]:
+        typer.echo(f"paretocal: WEAK CHECK: {note}")
 
 
 @app.command()
