@@ -105,6 +105,17 @@ class TestPage:
         assert img.shape == f.image.shape
         assert np.abs(img.astype(int) - f.image.astype(int)).mean() < 6
 
+    def test_verdict_banner(self, run):
+        result, _, out = run
+        text = (out / "interactive.html").read_text(encoding="utf-8")
+        # Two frames: unreliable, with every reason listed in a visible banner.
+        assert result.reliability["verdict"] == "unreliable"
+        banner = re.search(r'<div id="verdict" class="verdict unreliable">(.*?)</div>', text,
+                           re.S)
+        assert banner and "UNRELIABLE" in banner.group(1)
+        assert banner.group(1).count("<li>") == len(result.reliability["reasons"])
+        assert "only 2 frame(s)" in banner.group(1)
+
     def test_self_contained(self, run):
         _, _, out = run
         text = (out / "interactive.html").read_text(encoding="utf-8")

@@ -274,13 +274,9 @@ STRICT_EXIT = 3
 
 def verdict_line(reliability: dict) -> str:
     """The CLI's last line: the verdict and its main reason, for a person."""
-    reasons = reliability.get("reasons") or []
-    if reliability.get("verdict") == "ok" or not reasons:
-        return ("paretocal: verdict OK: nothing the run measured casts doubt on the result "
-                f"({reliability.get('frames')} frames)")
-    more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
-            "result.json)" if len(reasons) > 1 else "")
-    return f"paretocal: verdict UNRELIABLE: {reasons[0]}{more}"
+    from .pipeline import verdict_text
+
+    return f"paretocal: verdict {verdict_text(reliability)}"
 
 
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,

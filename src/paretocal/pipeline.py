@@ -552,6 +552,18 @@ def reliability(result: "CalibrationResult") -> dict:
     }
 
 
+def verdict_text(rel: dict) -> str:
+    """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
+    ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
+    reasons = rel.get("reasons") or []
+    if rel.get("verdict") == "ok" or not reasons:
+        return (f"OK: nothing the run measured casts doubt on the result ({rel.get('frames')} "
+                "frames)")
+    more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
+            "result.json)" if len(reasons) > 1 else "")
+    return f"UNRELIABLE: {reasons[0]}{more}"
+
+
 class _Stage:
     """The objective built from the frames' features as seen from ``T_view``.
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -85,6 +86,13 @@ def pareto_figure(result, path: Path) -> None:
         h1, l1 = ax2.get_legend_handles_labels()
         h2, l2 = ax3.get_legend_handles_labels()
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center")
+    rel = getattr(result, "reliability", None)
+    if rel:
+        from ..pipeline import verdict_text
+
+        ok = rel.get("verdict") == "ok"
+        fig.suptitle(textwrap.fill(verdict_text(rel), 40 * panels), fontsize=10,
+                     color="darkgreen" if ok else "darkred", fontweight="bold")
     fig.tight_layout()
     _save(fig, path)
 

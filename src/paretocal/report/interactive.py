@@ -41,6 +41,10 @@ td,th{border:1px solid #ccc;padding:0.2em 0.55em;text-align:left} th{background:
 .views button{font:inherit;padding:0.25em 0.9em;margin-right:0.4em;border:1px solid #999;
 border-radius:4px;background:#f7f7f7;cursor:pointer} .views button.active{background:#d33;color:#fff;
 border-color:#a00} #caption{margin:0.4em 0;font-size:0.95em} .muted{color:#666;font-size:0.85em}
+.verdict{padding:0.5em 0.9em;margin:0.5em 0;border-radius:4px;font-weight:600}
+.verdict ul{margin:0.3em 0 0 1.2em;padding:0;font-weight:400}
+.verdict.ok{background:#e6f4ea;border:1px solid #2e7d32} .verdict.unreliable{background:#fdecea;
+border:2px solid #c62828}
 """
 
 JS = r"""
@@ -319,6 +323,21 @@ def _run_table(result, frame: Frame) -> str:
     return f'<table id="run-table">{body}</table>'
 
 
+def _verdict_banner(result) -> str:
+    """The run's verdict as a banner: every reason when it is unreliable."""
+    rel = getattr(result, "reliability", None)
+    if not rel:
+        return ""
+    from ..pipeline import verdict_text
+
+    ok = rel.get("verdict") == "ok"
+    items = "" if ok else "<ul>" + "".join(f"<li>{html.escape(r)}</li>"
+                                            for r in rel.get("reasons", [])) + "</ul>"
+    head = verdict_text(rel) if ok else "UNRELIABLE: do not use this result as it is"
+    return (f'<div id="verdict" class="verdict {"ok" if ok else "unreliable"}">'
+            f"{html.escape(head)}{items}</div>")
+
+
 def write_interactive(result, frames: list[Frame], path: str | Path, frame: int = 0,
                       max_points: int = MAX_POINTS) -> Path:
     """Write the interactive report page of a calibration run.
@@ -412,6 +431,7 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
 </head>
 <body>
 <h1>{html.escape(title)}</h1>
+{_verdict_banner(result)}
 <p class="muted">Hover a solution of the front for its variables and cost; click it to project
 the LiDAR points of frame {html.escape(f.name)} with its extrinsic. The buttons compare the
 initial, the chosen and (when known) the dataset's reference extrinsic.</p>
