@@ -314,7 +314,7 @@ def test_page_projects_through_the_lens_model_in_browser(request, tmp_path):
                 xyz, z_min = _points(data), data["z_min"]
                 page = browser.new_page(viewport={"width": 1400, "height": 1100})
                 errors = []
-                page.on("pageerror", lambda e: errors.append(str(e)))
+                page.on("pageerror", lambda e, errors=errors: errors.append(str(e)))
                 page.goto(path.as_uri())
                 page.wait_for_selector("body[data-ready='1']", timeout=60_000)
                 for view, T in views.items():

@@ -5,7 +5,6 @@ states which returns must (or must not) become edges.
 """
 
 import numpy as np
-import pytest
 
 from paretocal.features.lidar import DEPTH_EDGE, lidar_features
 from paretocal.features.rings import Rings, _as_rings

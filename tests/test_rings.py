@@ -1,6 +1,5 @@
 """Ring recovery against exact truth on rig variants of real KITTI sweeps (made at run time)."""
 
-import numpy as np
 import pytest
 
 from paretocal.features.prepare import sensor_points
