@@ -89,3 +89,23 @@ def test_implausible_rings_are_said_with_the_file_and_the_fallback(sweeps, raw_f
     text = [rec.getMessage() for rec in caplog.records]
     assert any(str(frame.points_path) in t and "lidar_pose" in t and "unreliable" in t
                for t in text), text
+
+
+def test_later_sweeps_labelled_with_the_first_sweeps_lines(sweeps):
+    # The line model of one sweep labels the next sweeps of the same sensor exactly, without
+    # a note (notes are problems the user is told about).
+    first = recover_rings(firing_order(sweeps[0]).points)
+    for v in (firing_order(sweeps[1]), shuffled(decimate(sweeps[2], 1), 7)):
+        r = recover_rings(v.points, model=first)
+        assert r.method == "lines" and r.n_rings == 64 and not r.notes
+        assert ring_accuracy(r.ring, v.ring) >= 0.99
+
+
+def test_a_model_that_does_not_fit_is_replaced(sweeps):
+    # A 16-line model cannot explain a 64-beam sweep: the sweep is searched afresh and the
+    # note says so.
+    first = recover_rings(firing_order(decimate(sweeps[0], 4)).points)
+    v = firing_order(sweeps[1])
+    r = recover_rings(v.points, model=first)
+    assert r.n_rings == 64 and ring_accuracy(r.ring, v.ring) >= 0.99
+    assert any("earlier sweep's line model" in n for n in r.notes)

@@ -111,11 +111,12 @@ def sensor_points(frame: Frame) -> np.ndarray:
 
 
 def frame_rings(frame: Frame, features: FeatureSettings,
-                rng: np.random.Generator | int | None = 0) -> Rings:
+                rng: np.random.Generator | int | None = 0, model: Rings | None = None) -> Rings:
     """The rings of a frame's sweep: the file's ring field when plausible, else recovered
-    (see :func:`~paretocal.features.rings.recover_rings`)."""
+    (see :func:`~paretocal.features.rings.recover_rings`; ``model``, an earlier sweep's rings
+    of the same sensor, makes the recovery of an unordered sweep several times cheaper)."""
     return recover_rings(sensor_points(frame), features.ring_method, ring_field=frame.ring,
-                         rng=rng, source=str(frame.points_path))
+                         rng=rng, source=str(frame.points_path), model=model)
 
 
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,

@@ -598,8 +598,8 @@ def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
     rank = np.empty(len(order), dtype=np.int32)
     rank[order] = np.arange(len(order), dtype=np.int32)
     ring[idx[within]] = rank[lab[within]]
-    return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring),
-                 ["labelled with the line model of an earlier sweep"])
+    # No note: ``notes`` are problems the user is told about, and this is not one.
+    return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring))
 
 
 # --- choosing a method ---------------------------------------------------------------------------
