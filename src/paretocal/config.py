@@ -30,6 +30,7 @@ class FeatureSettings:
     canny_low: float = 50.0          #: Canny hysteresis thresholds
     canny_high: float = 150.0
     canny_relative: bool = False     #: thresholds for a full-range image, scaled by exposure
+    equalize: bool = False           #: local contrast equalised (CLAHE) before Canny
     min_edge_px: int = 0             #: drop edge fragments smaller than this (px)
     depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
     cross_ring: bool = True          #: also detect edges against the rings above and below

@@ -78,9 +78,21 @@ def canny_thresholds(gray: np.ndarray, low: float, high: float,
     return hi * low / high, hi
 
 
+#: CLAHE: contrast limit (OpenCV's clip limit, relative to a flat histogram) and tiles per
+#: image side. 2 is the customary limit; tiles follow the image (8 per side at any size).
+CLAHE_CLIP = 2.0
+CLAHE_TILES = 8
+
+
+def equalize_contrast(gray: np.ndarray) -> np.ndarray:
+    """Contrast-limited adaptive histogram equalisation of a grey image (H, W) uint8."""
+    return cv2.createCLAHE(clipLimit=CLAHE_CLIP,
+                           tileGridSize=(CLAHE_TILES, CLAHE_TILES)).apply(gray)
+
+
 def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
              canny_high: float = 150.0, min_edge_px: int = 0, relative: bool = False,
-             mask: np.ndarray | None = None) -> np.ndarray:
+             mask: np.ndarray | None = None, equalize: bool = False) -> np.ndarray:
     """Canny edges of a Gaussian-blurred grey image.
 
     Parameters
@@ -97,12 +109,17 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
         (:func:`canny_thresholds`).
     mask : ndarray, shape (H, W), bool, optional
         Usable pixels, for the white level and noise of relative thresholds.
+    equalize : bool
+        Equalise local contrast first (CLAHE, :func:`equalize_contrast`): structure in dark
+        or flat parts of the image (night scenes, shadows) reaches the thresholds.
 
     Returns
     -------
     ndarray, shape (H, W), uint8 with values 0 and 255
     """
     gray = image_bgr if image_bgr.ndim == 2 else cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
+    if equalize:
+        gray = equalize_contrast(gray)
     if blur_sigma > 0:
         gray = cv2.GaussianBlur(gray, (0, 0), blur_sigma)
     if relative:
@@ -140,15 +157,16 @@ def drop_masked_edges(edges: np.ndarray, mask: np.ndarray, blur_sigma: float) ->
 def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
                    canny_high: float = 150.0, truncation_px: float = 10.0,
                    min_edge_px: int = 0, mask: np.ndarray | None = None,
-                   relative: bool = False) -> ImageFeatures:
+                   relative: bool = False, equalize: bool = False) -> ImageFeatures:
     """Edge map, truncated distance transform and edge pixel list of one image.
 
     ``mask`` (H, W) bool, True on usable pixels: edges on or near masked pixels are dropped
     before the distance transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over
     the usable pixels. ``relative``: thresholds scaled to the image's exposure
-    (:func:`canny_thresholds`).
+    (:func:`canny_thresholds`); ``equalize``: local contrast equalised first.
     """
-    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px, relative, mask)
+    edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px, relative, mask,
+                     equalize)
     if mask is not None:
         edges = drop_masked_edges(edges, mask, blur_sigma)
     v, u = np.nonzero(edges)
