@@ -532,16 +532,24 @@ def rings_from_lines(points: np.ndarray, rng: np.random.Generator | int | None =
     a, h = _prune(ts, ivs, a, h, s)
     a, h, s = _k_lines(ts, ivs, a, h, 2, min_points)
     a, h, s = _merge_split(ts, ivs, a, h, s, min_points)
-    # Label every point: nearest line, within tolerance.
-    lab, res = nearest_line(te[idx], inv[idx], a, h)
-    tol = LINE_TOL_SIGMA * np.maximum(s, np.median(s))
-    within = res < tol[lab] * 2.0
+    # Judged like every other method's labels: lines found in the wrong frame explain their
+    # own points (their tolerance grows with their scatter) but are no laser's rings.
+    return _label_rings(pts, te[idx], inv[idx], idx, a, h, np.maximum(s, np.median(s)))
+
+
+def _label_rings(pts: np.ndarray, te: np.ndarray, inv: np.ndarray, idx: np.ndarray,
+                 a: np.ndarray, h: np.ndarray, sigma: np.ndarray) -> Rings:
+    """Rings from lines ``(a, h)`` (K,): every point ``idx`` of ``pts`` (with line coordinates
+    ``te``, ``inv``) takes its nearest line's ring when within twice
+    :data:`LINE_TOL_SIGMA` x ``sigma`` of it (others -1); rings numbered by
+    :func:`ring_order`."""
+    ring = np.full(len(pts), -1, dtype=np.int32)
+    lab, res = nearest_line(te, inv, a, h)
+    within = res < LINE_TOL_SIGMA * sigma[lab] * 2.0
     order = ring_order(a, h)
     rank = np.empty(len(order), dtype=np.int32)
     rank[order] = np.arange(len(order), dtype=np.int32)
     ring[idx[within]] = rank[lab[within]]
-    # Judged like every other method's labels: lines found in the wrong frame explain their
-    # own points (their tolerance grows with their scatter) but are no laser's rings.
     return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring))
 
 
@@ -590,16 +598,9 @@ def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
         an, hn, sn = fit_ring_lines(ti, ii, lab, len(a))
         fitted = np.isfinite(an)
         a, h, s = np.where(fitted, an, a), np.where(fitted, hn, h), np.where(fitted, sn, s)
-    lab, res = nearest_line(ti, ii, a, h)
     s_typ = float(np.nanmedian(s)) if np.isfinite(s).any() else 0.0
-    tol = LINE_TOL_SIGMA * np.maximum(np.nan_to_num(s, nan=s_typ), s_typ)
-    within = res < tol[lab] * 2.0
-    order = ring_order(a, h)
-    rank = np.empty(len(order), dtype=np.int32)
-    rank[order] = np.arange(len(order), dtype=np.int32)
-    ring[idx[within]] = rank[lab[within]]
     # No note: ``notes`` are problems the user is told about, and this is not one.
-    return Rings(ring, len(a), a[order], h[order], "lines", ring_purity(pts, ring))
+    return _label_rings(pts, ti, ii, idx, a, h, np.maximum(np.nan_to_num(s, nan=s_typ), s_typ))
 
 
 # --- choosing a method ---------------------------------------------------------------------------
