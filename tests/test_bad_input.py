@@ -566,7 +566,7 @@ def _fake_result(**over):
     deg, m = over.pop("init_error", (10.0, 0.3))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
-                        feature_counts={},
+                        feature_counts=over.pop("feature_counts", {}),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
                                                             "init_error_deg": deg,
                                                             "init_error_m": m}))
@@ -578,6 +578,8 @@ def _fake_result(**over):
 @pytest.mark.parametrize("over, reason", [
     ({}, None),
     ({"frames": ["a", "b"]}, "only 2 frame(s)"),
+    ({"feature_counts": {"frames_contributing": 1}},
+     "only 1 of the 4 frames have LiDAR feature points in view"),
     ({"in_view": 0.3}, "only 30 % of the feature points project into the image"),
     ({"x": [0.0, 0.0, 0.0999, 0, 0, 0]}, "sits at the search bound on z"),
     ({"x": [0, 0, 0, -1.99, 0, 0]}, "sits at the search bound on yaw"),

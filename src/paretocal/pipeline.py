@@ -478,9 +478,16 @@ def reliability(result: "CalibrationResult") -> dict:
 
     reasons = []
     n_frames = len(result.frames)
+    # Frames passed are not frames that count: one with no feature points in view adds none.
+    useful = (result.feature_counts or {}).get("frames_contributing", n_frames)
     if n_frames < RELIABLE_MIN_FRAMES:
         reasons.append(f"only {n_frames} frame(s): too few to average out one scene's biases "
                        f"(use at least {RELIABLE_MIN_FRAMES})")
+    elif useful < RELIABLE_MIN_FRAMES:
+        reasons.append(f"only {useful} of the {n_frames} frames have LiDAR feature points in "
+                       f"view (at least {MIN_POINTS_PER_FRAME} each): too few to average out "
+                       f"one scene's biases; use at least {RELIABLE_MIN_FRAMES} frames whose "
+                       "clouds and images overlap")
     in_view = result.objectives().get("in_view")
     if in_view is not None and in_view < RELIABLE_MIN_IN_VIEW:
         reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
@@ -808,4 +815,7 @@ def _feature_counts(feats: list[FrameFeatures]) -> dict:
                      "spacing_deg_median": summaries[0]["spacing_deg_median"]}
     return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
             "total": total, "rings": sorted({f.n_rings for f in feats}),
-            "ring_recovery": ring_info}
+            "ring_recovery": ring_info,
+            # Frames with enough feature points in view to constrain anything.
+            "frames_contributing": int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME
+                                           for f in feats))}
