@@ -70,11 +70,11 @@ def test_same_seed_same_estimate(sweep):
 def test_locate_lidar_sources(raw_frames, sweep):
     s = Settings()
     frames = raw_frames[:1]
-    out, info = locate_lidar(frames, s)
+    out, info, _ = locate_lidar(frames, s)
     assert info["source"] == "cloud origin" and out[0].sensor_pose is None
     w = to_vehicle_frame(sweep)
     moved = [replace(frames[0], points=w.points, ring=None, sensor_pose=None)]
-    out, info = locate_lidar(moved, s)
+    out, info, _ = locate_lidar(moved, s)
     assert info["source"] == "estimated" and info["purity"] >= MIN_PURITY
     angle, offset = _axis_errors(type("E", (), {"pose": out[0].sensor_pose}), w.sensor_pose)
     assert angle < 0.05 and offset < 0.02
@@ -117,7 +117,7 @@ def test_a_pose_that_cannot_be_found_is_said(raw_frames, sweep, monkeypatch, cap
     w = to_vehicle_frame(sweep)
     moved = [replace(raw_frames[0], points=w.points, ring=None, sensor_pose=None)]
     monkeypatch.setattr(sensor, "estimate_sensor_pose", lambda *a, **k: None)
-    out, info = locate_lidar(moved, Settings())
+    out, info, _ = locate_lidar(moved, Settings())
     assert info["source"] == "unknown" and out[0].sensor_pose is None
     assert info["purity_at_origin"] < MIN_PURITY and "ground plane" in info["reason"]
     with caplog.at_level("WARNING", logger="paretocal"):

@@ -292,7 +292,8 @@ def warn_unlocated(frames: list[Frame], info: dict) -> None:
                 info.get("reason", ""))
 
 
-def locate_lidar(frames: list[Frame], settings: Settings) -> tuple[list[Frame], dict]:
+def locate_lidar(frames: list[Frame],
+                 settings: Settings) -> tuple[list[Frame], dict, Rings | None]:
     """The LiDAR's pose in the clouds' frame: given, not needed, or estimated from a sweep.
 
     Ring geometry is taken about the sensor's own origin and axis. A pose in calib.yaml
@@ -309,28 +310,31 @@ def locate_lidar(frames: list[Frame], settings: Settings) -> tuple[list[Frame], 
     info : dict
         ``source``: "calib.yaml", "ring field", "cloud origin", "estimated" or "unknown",
         with the estimate's summary and the rings' purity where they were checked.
+    first_rings : Rings or None
+        The first frame's rings about the pose returned, when they were recovered here (for
+        :func:`sweep_rings`, which then need not recover them again).
     """
     import dataclasses
 
     from .features.sensor import estimate_sensor_pose
 
     if any(f.sensor_pose is not None for f in frames):
-        return frames, {"source": "calib.yaml"}
+        return frames, {"source": "calib.yaml"}, None
     if settings.features.ring_method in ("field", "scan", "elevation"):
         return frames, {"source": "cloud origin", "note": "ring method "
-                        f"{settings.features.ring_method!r} asked for"}
+                        f"{settings.features.ring_method!r} asked for"}, None
     first = frames[0]
     if first.ring is not None:
-        return frames, {"source": "ring field"}
+        return frames, {"source": "ring field"}, None
     rng = np.random.default_rng(np.random.SeedSequence([settings.search.seed, 2]))
     here = frame_rings(first, settings.features, rng)
     if here.purity >= MIN_PURITY and here.n_rings >= MIN_RINGS:
-        return frames, {"source": "cloud origin", "purity": round(float(here.purity), 4)}
+        return frames, {"source": "cloud origin", "purity": round(float(here.purity), 4)}, here
     est = estimate_sensor_pose(first.points, rng)
     if est is None or not est.ok:
         why = "no ground plane to start from" if est is None else "; ".join(est.notes)
         return frames, {"source": "unknown", "purity_at_origin": round(float(here.purity), 4),
-                        "estimate": None if est is None else est.summary(), "reason": why}
+                        "estimate": None if est is None else est.summary(), "reason": why}, here
     moved = [dataclasses.replace(f, sensor_pose=est.pose) for f in frames]
     there = frame_rings(moved[0], settings.features, rng)
     info = {"source": "estimated", "estimate": est.summary(),
@@ -339,16 +343,17 @@ def locate_lidar(frames: list[Frame], settings: Settings) -> tuple[list[Frame], 
     if there.purity < MIN_PURITY or there.n_rings < MIN_RINGS:
         info.update(source="unknown", reason="the rings do not fit the line model in the "
                     "estimated frame either")
-        return frames, info
+        return frames, info, here
     p = est.pose[:3, 3]
     log.info("%s: the LiDAR's pose was estimated from the sweep: at (%.2f, %.2f, %.2f) m in "
              "the cloud's frame, axis tilted %.2f deg (%d rings, purity %.3f); give "
              "lidar_pose in calib.yaml to set it", first.points_path, p[0], p[1], p[2],
              est.tilt_deg, there.n_rings, there.purity)
-    return moved, info
+    return moved, info, there
 
 
-def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
+def sweep_rings(frames: list[Frame], settings: Settings,
+                first: Rings | None = None) -> list[Rings]:
     """The rings of every frame's sweep (see :func:`~paretocal.features.prepare.frame_rings`);
     :func:`warn_rings` tells the user about the implausible ones.
 
@@ -356,11 +361,13 @@ def sweep_rings(frames: list[Frame], settings: Settings) -> list[Rings]:
     by the line search and are plausible, the next sweeps are labelled with its line model
     first (measured on the KITTI drive in firing and random order: 0.4 s a sweep instead of
     1.5-2.7 s, every point on its true ring as before); a sweep the model does not fit is
-    searched afresh."""
+    searched afresh. ``first``: the first frame's rings when already known (from
+    :func:`locate_lidar`)."""
     seq = np.random.SeedSequence([settings.search.seed, 1])
     out, model = [], None
-    for f, child in zip(frames, seq.spawn(len(frames))):
-        r = frame_rings(f, settings.features, np.random.default_rng(child), model)
+    for k, (f, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
+        r = (first if k == 0 and first is not None else
+             frame_rings(f, settings.features, np.random.default_rng(child), model))
         if r.method == "lines" and r.n_rings >= MIN_RINGS and r.purity >= MIN_PURITY:
             model = r
         out.append(r)
@@ -661,12 +668,12 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         return None if progress is None else (lambda done, total, *a: progress(stage, done, total))
 
     t0 = time.perf_counter()
-    frames, lidar_info = locate_lidar(frames, settings)
+    frames, lidar_info, first_rings = locate_lidar(frames, settings)
     timings["lidar_pose"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # Rings from the sweeps as recorded (each return on its laser's cone about the sensor);
     # everything else from the sweeps de-skewed to the image time.
-    rings = sweep_rings(frames, settings)
+    rings = sweep_rings(frames, settings, first_rings)
     timings["rings"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     frames, motion_info = compensate_motion(frames, settings)
