@@ -32,6 +32,10 @@ MAX_GAP_STEPS = 6.0
 #: Neighbouring returns are recorded within a few firings of each other; two returns more than
 #: this share of the sweep's duration apart lie on either side of the seam.
 MAX_NEIGHBOUR_DT_SWEEPS = 0.5
+#: Range tolerance of "the same surface" between neighbouring returns: 5 % of the range (a
+#: surface seen at grazing incidence) plus 10 cm (range noise).
+SAME_SURFACE_REL = 0.05
+SAME_SURFACE_M = 0.1
 
 
 @dataclass(eq=False)
@@ -221,10 +225,12 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     jump = np.maximum(jump_n, jump_p)
     is_edge = jump > depth_jump_m
     far = np.where(jump_n >= jump_p, nxt, prv)
+    # Two neighbouring returns closer in range than this (m) are taken for one surface (the
+    # support of an edge, a contour that continues, an object's top against the sky).
+    tol = SAME_SURFACE_REL * r + SAME_SURFACE_M
     if edge_support:
         # The next two returns on the other side along the ring must lie on the near return's
         # own surface (one could be a coincidence in foliage).
-        tol = 0.05 * r + 0.1
         back = jump_n >= jump_p
         o1 = np.where(back, prv, nxt)
         o2 = np.where(back, prv[o1], nxt[o1])
@@ -289,7 +295,6 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
             if edge_support:
                 # The two rings on the other side must hit the near return's own surface.
                 (c1, ok1), (c2, ok2) = nb[-step], nb[-2 * step]
-                tol = 0.05 * r + 0.1
                 hit &= ok1 & ok2 & (np.abs(r[c1] - r) < tol) & (np.abs(r[c2] - r) < tol)
             best_jump[hit] = cj[hit]
             best_far[hit] = cand[hit]
@@ -301,7 +306,6 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
             # above or below, a horizontal one (a cross-ring edge) on the neighbouring return
             # of the ring, at about the same range. Foliage jumps in range at random and its
             # edges rarely continue; a pole one return wide does.
-            tol = 0.05 * r + 0.1
             cross = best_far >= 0
             (up, ok_u), (dn, ok_d) = nb[-1], nb[1]
             keep_a = ((ok_u & is_edge[up] & (np.abs(r[up] - r) < tol))
@@ -321,7 +325,6 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
             adjacent = ring[cand_a] == ring - 1
             missing = (ring > 0) & ((dpsi_a >= gap) | ~adjacent)
             below, ok_b = nb[1]
-            tol = 0.05 * r + 0.1
             sky = missing & ok_b & (np.abs(r[below] - r) < tol) & ~is_edge
             if edge_support:
                 below2, ok_b2 = nb[2]
