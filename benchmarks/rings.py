@@ -9,7 +9,8 @@ recovered as ``paretocal calibrate`` does without a ring field (``auto``): for t
 the LiDAR's pose is first estimated from the sweep
 (:func:`paretocal.features.sensor.estimate_sensor_pose`), as when ``calib.yaml`` has no
 ``lidar_pose``. Printed per variant: the share of points on their true ring (min and median over
-the frames), the rings found, the method used, and the time per sweep.
+the frames), the rings found, the method used, and the time per sweep. ``--json`` writes the
+figures as JSON (to FILE, or alone to standard output without one, the table then on stderr).
 """
 
 from __future__ import annotations
@@ -61,7 +62,9 @@ def main(argv=None) -> int:
     data = Path(os.environ.get("PARETOCAL_DATA", ROOT.parent / "shared" / "data"))
     frames = load_frames(data / "kitti_raw" / "2011_09_26", args.frames)
     rows = {}
-    print(f"{'variant':32s} {'min':>7s} {'median':>7s} {'rings':>9s}  method   s/sweep")
+    # With --json and no file the JSON alone goes to standard output, the table to stderr.
+    out = sys.stderr if args.json == "-" else sys.stdout
+    print(f"{'variant':32s} {'min':>7s} {'median':>7s} {'rings':>9s}  method   s/sweep", file=out)
     for name, make in VARIANTS.items():
         acc, n, methods, dt = [], set(), set(), []
         for k, f in enumerate(frames):
@@ -81,7 +84,7 @@ def main(argv=None) -> int:
                       "frames": len(frames)}
         print(f"{name:32s} {100 * min(acc):6.2f}% {100 * np.median(acc):6.2f}% "
               f"{','.join(map(str, sorted(n))):>9s}  {','.join(sorted(methods)):8s} "
-              f"{np.median(dt):.2f}", flush=True)
+              f"{np.median(dt):.2f}", file=out, flush=True)
     if args.json:
         text = json.dumps(rows, indent=1)
         if args.json == "-":
