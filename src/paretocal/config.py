@@ -129,6 +129,8 @@ class DecisionSettings:
     max_deviation_px: float = 1.0    #: knee: only solutions this close to the best-supported one
     refine: bool = True              #: polish the front locally at each solution's n
     refine_iters: int = 12           #: Newton iterations of the polish
+    restarts: int = 1                #: independent restarts checking the result (0: none)
+    restart_share: float = 0.25      #: each restart's share of the search's evaluations
 
 
 @dataclass(frozen=True)
@@ -257,6 +259,10 @@ class Settings:
             raise SettingsError(f"--time-offset {m.time_offset_s}: at most 1 s either way")
         if m.points < 1000:
             raise SettingsError(f"motion.points {m.points}: at least 1000")
+        if d.restarts < 0 or d.restarts > 10:
+            raise SettingsError(f"decision.restarts {d.restarts}: between 0 and 10")
+        if not 0.0 < d.restart_share <= 1.0:
+            raise SettingsError(f"decision.restart_share {d.restart_share}: must lie in (0, 1]")
         if d.refine_iters < 0:
             raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
         if f.ring_method not in ("auto", "field", "scan", "lines", "elevation"):

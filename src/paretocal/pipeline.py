@@ -25,35 +25,16 @@ from .objective.cost import CostModel
 from .search import VARIABLES, coarse_seeds, polish_front, run_nsga2
 from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
+from .verdict import (MIN_POINTS_PER_FRAME, RELIABLE_MIN_FRAMES, gather_evidence,  # noqa: F401
+                      reliability, verdict_text)
 
 log = logging.getLogger(__name__)
 
-MIN_POINTS_PER_FRAME = 30
 #: A frame with fewer Canny edge pixels is blank for the objective: a real photograph has
 #: thousands (a KITTI frame about 30 000); a flat or black image gives none, or a few dozen
 #: from noise and compression, which no LiDAR edge could be aligned with.
 MIN_EDGE_PIXELS = 100
 DEFAULT_N_MIN = 20
-
-# --- reliability verdict of result.json (see reliability()) ---------------------------------
-#: Fewer frames cannot average out one scene's biases (a single wall, a single pole), and the
-#: jackknife standard errors need several frames to mean anything.
-RELIABLE_MIN_FRAMES = 3
-#: Feature points are chosen in view (plus a 60 px margin) at the initial extrinsic, so a sound
-#: solution keeps most of them in the image (0.8-0.95 on KITTI); below this share the score is
-#: mostly the out-of-view charge and says little about alignment.
-RELIABLE_MIN_IN_VIEW = 0.6
-#: A correction within this share of a search bound was stopped by the box, not by the data:
-#: the optimum may lie outside it.
-RELIABLE_BOUND_MARGIN = 0.01
-#: Jackknife (leave-one-frame-out) standard errors above these mean the frames disagree about
-#: the pose by more than a usable calibration allows (1 deg moves a point 20 m away by 35 cm).
-RELIABLE_MAX_SE_DEG = 1.0
-RELIABLE_MAX_SE_CM = 10.0
-#: A sweep skewed by more than this (m) and not de-skewed misplaces points by up to half of
-#: it: the same scale as the translation error a usable calibration allows.
-MAX_UNCOMPENSATED_SKEW_M = 0.1
-
 
 @dataclass
 class Front:
@@ -105,6 +86,9 @@ class CalibrationResult:
     motion: dict | None = None
     #: What the input files offered: the point fields used, the camera model, notes.
     inputs: dict | None = None
+    #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
+    #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
+    evidence: dict | None = None
     #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
     sweeps: list | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
@@ -473,121 +457,6 @@ def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float) -> str:
     return why
 
 
-def reliability(result: "CalibrationResult") -> dict:
-    """A short verdict on whether to trust ``result``, from what the run already computed.
-
-    ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
-    unreliable: too few frames, few feature points in view at the chosen extrinsic, a
-    correction stopped by a search bound (or a local optimum beyond it), or frames that
-    disagree (jackknife standard errors). Thresholds: the ``RELIABLE_*`` constants.
-    """
-    from .quality import AXES
-
-    reasons = []
-    n_frames = len(result.frames)
-    # Frames passed are not frames that count: one with no feature points in view adds none.
-    useful = (result.feature_counts or {}).get("frames_contributing", n_frames)
-    if n_frames < RELIABLE_MIN_FRAMES:
-        reasons.append(f"only {n_frames} frame(s): too few to average out one scene's biases "
-                       f"(use at least {RELIABLE_MIN_FRAMES})")
-    elif useful < RELIABLE_MIN_FRAMES:
-        reasons.append(f"only {useful} of the {n_frames} frames have LiDAR feature points in "
-                       f"view (at least {MIN_POINTS_PER_FRAME} each): too few to average out "
-                       f"one scene's biases; use at least {RELIABLE_MIN_FRAMES} frames whose "
-                       "clouds and images overlap")
-    in_view = result.objectives().get("in_view")
-    if in_view is not None and in_view < RELIABLE_MIN_IN_VIEW:
-        reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
-                       f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
-    s = result.settings.search
-    bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
-    x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)
-    at_bound = [a for a, v, b in zip(AXES, x, bound)
-                if abs(v) >= (1.0 - RELIABLE_BOUND_MARGIN) * b]
-    if at_bound:
-        reasons.append(f"the correction sits at the search bound on {', '.join(at_bound)} "
-                       f"(+-{s.bound_t:g} m, +-{s.bound_r:g} deg): the optimum may lie "
-                       "outside; if the initial extrinsic may be further off, say so with "
-                       "--init-error, or improve --init")
-    err = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
-    beyond = [a for a, v, e in zip(AXES, x, err) if abs(v) > e and a not in at_bound]
-    if beyond:
-        units = ["cm" if a in ("x", "y", "z") else "deg" for a in beyond]
-        scale = [100.0 if u == "cm" else 1.0 for u in units]
-        moved = ", ".join(f"{a} {abs(x[AXES.index(a)]) * k:.3g} {u}"
-                          for a, u, k in zip(beyond, units, scale))
-        reasons.append(f"the correction lies beyond the stated initial error ({moved}; "
-                       f"--init-error {s.init_error_deg:g},{s.init_error_m:g}): either the "
-                       "start was worse than stated (say so with --init-error) or the frames "
-                       "mislead the objective; check the overlays")
-    q = result.quality or {}
-    step = q.get("step_to_local_optimum")
-    if step is not None:
-        to_si = np.r_[[0.01] * 3, [1.0] * 3]              # the report's cm -> m, deg stays
-        target = x + np.array([step[a] for a in AXES]) * to_si
-        beyond = [a for a, t, b, v in zip(AXES, target, bound, x)
-                  if abs(t) > b and a not in at_bound]
-        if beyond:
-            reasons.append(f"the objective still falls beyond the search bound on "
-                           f"{', '.join(beyond)}: the optimum lies outside the box; widen "
-                           "--bound-t / --bound-r")
-    basin = (result.decision or {}).get("basin") or {}
-    if basin.get("ambiguous"):
-        alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
-        p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]
-        beyond = basin["kept"] == "near"
-        where = ("the result is the optimum next to the initial extrinsic, the other lies "
-                 "beyond the stated --init-error" if beyond else
-                 "the result is the one that fits better")
-        reasons.append(
-            f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
-            f"{basin['frames']} frames: p = {p:.2g}); {where}; add frames with more varied "
-            "structure, or state a smaller --init-error if the start is known to be close")
-    mo = result.motion or {}
-    if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
-        reasons.append(f"the LiDAR moved {mo['skew_m']:.2g} m during a sweep and the motion "
-                       f"could not be compensated ({mo.get('reason')}): moving structure is "
-                       "misplaced by up to half that")
-    rings = (result.feature_counts or {}).get("ring_recovery") or {}
-    if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
-        reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
-                       f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
-                       "field or the LiDAR's pose (lidar_pose) in calib.yaml")
-    se = q.get("jackknife_se") or {}
-    units = q.get("units") or {}
-    se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
-                 default=None)
-    se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
-                default=None)
-    loose = [f"{a} {v:.3g} {units[a]}" for a, v in se.items() if np.isfinite(v) and (
-        (units.get(a) == "deg" and v > RELIABLE_MAX_SE_DEG)
-        or (units.get(a) == "cm" and v > RELIABLE_MAX_SE_CM))]
-    if loose:
-        reasons.append(f"the frames disagree: jackknife standard error {', '.join(loose)} "
-                       f"(limits {RELIABLE_MAX_SE_DEG:g} deg, {RELIABLE_MAX_SE_CM:g} cm)")
-    return {
-        "verdict": "unreliable" if reasons else "ok",
-        "reasons": reasons,
-        "frames": n_frames,
-        "in_view": None if in_view is None else round(float(in_view), 4),
-        "at_bound": at_bound,
-        "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
-        "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
-    }
-
-
-def verdict_text(rel: dict) -> str:
-    """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
-    ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
-    reasons = rel.get("reasons") or []
-    if rel.get("verdict") == "ok" or not reasons:
-        return (f"OK: nothing the run measured casts doubt on the result ({rel.get('frames')} "
-                "frames)")
-    more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
-            "result.json)" if len(reasons) > 1 else "")
-    return f"UNRELIABLE: {reasons[0]}{more}"
-
-
 class _Stage:
     """The objective built from the frames' features as seen from ``T_view``.
 
@@ -766,6 +635,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                      "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
                      "basin": basin})
     quality = quality_report(objective, X[i])
+    t0 = time.perf_counter()
+    evidence = gather_evidence(objective, settings, n_min, n_max, X[i], quality)
+    timings["verdict"] = time.perf_counter() - t0
     wall = time.perf_counter() - t_start
     timings["total"] = wall
     result = CalibrationResult(
@@ -782,6 +654,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                                "purity": round(float(r.purity), 4)}
                               for f, r in zip(frames, rings)]
     result.sweeps = frames
+    result.evidence = evidence
     result.reliability = reliability(result)
     if result.reliability["verdict"] != "ok":
         log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))

@@ -1,0 +1,383 @@
+"""Whether to trust a calibration: the evidence, the per-axis intervals and the verdict.
+
+A user calibrating their own rig has no ground truth, so the verdict of ``result.json`` is all
+they have. It is built from what the run computed (frames that contribute, points in view,
+search bounds, the stated initial error, the near/far basin test, motion, rings, the jackknife
+agreement of the frames) and from two checks made for it after the calibration:
+
+* **an independent restart** (:func:`restart_evidence`): a second, smaller search of the same
+  box from another random population, without the initial extrinsic or the seed grid, polished
+  to its local optimum. Frames that share one wrong basin agree with each other, so the jackknife
+  cannot see it; a second search that ends elsewhere and fits the frames as well (a paired test
+  over frames) can.
+* **image-cloud agreement** (:func:`contrast_evidence`): the objective at the result against
+  random poses within the stated initial error around it, frame by frame. A true alignment
+  explains every frame's edges clearly better than poses far away; images paired with clouds of
+  another scene, or a scene without structure, do not.
+
+:func:`intervals` turns the jackknife standard errors and the pixel resolution of each axis into
+per-axis 95 % intervals, and names the axes the data do not determine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .features.rings import MIN_PURITY
+from .geometry import pose_error
+from .quality import AXES, TO_REPORT, displacement_px, local_optimum
+from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
+
+#: A frame with fewer LiDAR feature points in view adds nothing the verdict can count on.
+MIN_POINTS_PER_FRAME = 30
+#: Fewer frames cannot average out one scene's biases (a single wall, a single pole), and the
+#: jackknife standard errors need several frames to mean anything.
+RELIABLE_MIN_FRAMES = 3
+#: Feature points are chosen in view (plus a 60 px margin) at the initial extrinsic, so a sound
+#: solution keeps most of them in the image (0.8-0.95 on KITTI); below this share the score is
+#: mostly the out-of-view charge and says little about alignment.
+RELIABLE_MIN_IN_VIEW = 0.6
+#: A correction within this share of a search bound was stopped by the box, not by the data:
+#: the optimum may lie outside it.
+RELIABLE_BOUND_MARGIN = 0.01
+#: Jackknife (leave-one-frame-out) standard errors above these mean the frames disagree about
+#: the pose by more than a usable calibration allows (1 deg moves a point 20 m away by 35 cm).
+RELIABLE_MAX_SE_DEG = 1.0
+RELIABLE_MAX_SE_CM = 10.0
+#: A sweep skewed by more than this (m) and not de-skewed misplaces points by up to half of
+#: it: the same scale as the translation error a usable calibration allows.
+MAX_UNCOMPENSATED_SKEW_M = 0.1
+
+
+# --- evidence gathered after the calibration -----------------------------------------------
+#: Random poses of the image-cloud agreement check.
+CONTRAST_POSES = 64
+#: The restart's result must be at least this clearly worse (one-sided p of the paired test
+#: over frames) for a distinct restart optimum to be dismissed.
+RESTART_P = 0.05
+#: Share of frames in which the result must beat 95 % of the random poses of the agreement
+#: check: frames of a true alignment each prefer it; mismatched images and clouds do not.
+CONTRAST_MIN_FRAMES_CLEAR = 0.5
+#: 95 % two-sided normal quantile of the per-axis intervals.
+Z95 = 1.959964
+#: Localisation floor of the edge alignment (px) added to the jackknife spread in the
+#: intervals: edges are located to about a pixel, so an axis is known no better than the change
+#: that moves the projected points by this much on average.
+RESOLUTION_PX = 1.0
+
+
+def _per_frame(objective, X: np.ndarray) -> np.ndarray:
+    """Per-frame objective (C, F) of the candidates X (C, 7), without the sampling charge."""
+    saved = objective.ucb_k
+    objective.ucb_k = 0.0
+    try:
+        return np.asarray(objective.chamfer(X)["per_frame"], dtype=np.float64)
+    finally:
+        objective.ucb_k = saved
+
+
+def _at_full_n(objective, x: np.ndarray) -> np.ndarray:
+    x = np.array(x, dtype=np.float64, copy=True)
+    x[6] = int(objective.scene.points_per_frame.max())
+    return x
+
+
+def restart_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
+                     x_opt: np.ndarray | None = None) -> dict:
+    """An independent restart and how it compares with the result.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+    settings : Settings
+        ``decision.restarts`` searches with ``decision.restart_share`` of the main search's
+        evaluations each (population and generations scaled by its square root), seeds
+        ``search.seed + 1, + 2, ...``; no initial extrinsic or seed grid in their populations.
+    n_min, n_max : int
+    x : ndarray, shape (7,)
+        The result's correction.
+    x_opt : ndarray, shape (7,), optional
+        The result's local optimum at every point (computed when omitted).
+
+    Returns
+    -------
+    dict
+        ``runs`` (list, per restart: ``separation_deg``, ``separation_cm``, ``separation_px``,
+        ``same_basin``, ``distinct`` (farther apart than a usable calibration allows), the
+        paired comparison ``mean_px`` (positive: the restart fits better), ``p_restart_better``
+        (one-sided), ``frames_restart_better``, ``evaluations``), ``disagrees`` (a distinct
+        restart optimum the frames do not clearly reject) and ``evaluations``.
+    """
+    from .search import run_nsga2
+
+    d = settings.decision
+    s = settings.search
+    x_opt = local_optimum(objective, x) if x_opt is None else x_opt
+    T0 = objective.transforms(x_opt[None])[0]
+    scale = math.sqrt(d.restart_share)
+    runs, evaluations = [], 0
+    for r in range(d.restarts):
+        rs = dataclasses.replace(s, pop=max(20, int(round(s.pop * scale))),
+                                 gens=max(10, int(round(s.gens * scale))),
+                                 seed=s.seed + 1 + r, include_init=False)
+        res = run_nsga2(objective, rs, n_min, n_max)
+        y = local_optimum(objective, res.X[int(np.argmin(res.F[:, 0]))])
+        e = pose_error(objective.transforms(y[None])[0], T0)
+        sep_px = displacement_px(objective, x_opt, y)
+        same = bool(sep_px <= SAME_BASIN_SHARE * objective.scene.truncation_px)
+        distinct = bool(not same and (e["rotation_deg"] > USABLE_DEG
+                                      or e["translation_cm"] > 100 * USABLE_M))
+        cmp = paired_preference(objective, x_opt, y)
+        runs.append({"separation_deg": round(float(e["rotation_deg"]), 4),
+                     "separation_cm": round(float(e["translation_cm"]), 3),
+                     "separation_px": round(float(sep_px), 3), "same_basin": same,
+                     "distinct": distinct, "mean_px": round(cmp["mean_px"], 5),
+                     "p_restart_better": round(cmp["p"], 5) if np.isfinite(cmp["p"]) else None,
+                     "frames_restart_better": cmp["frames_far_better"], "frames": cmp["frames"],
+                     "evaluations": int(res.evaluations), "correction": [float(v) for v in y[:6]]})
+        evaluations += int(res.evaluations)
+
+    def doubt(run):
+        # A distinct optimum is dismissed only when the frames clearly prefer the result.
+        p = run["p_restart_better"]
+        worse = p is not None and (1.0 - p) < RESTART_P
+        return run["distinct"] and not worse
+    return {"runs": runs, "disagrees": bool(any(doubt(r) for r in runs)),
+            "evaluations": evaluations}
+
+
+def contrast_evidence(objective, settings, x_opt: np.ndarray, poses: int = CONTRAST_POSES,
+                      rng: np.random.Generator | int | None = None) -> dict:
+    """How clearly the frames prefer the result over random poses about it.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+    settings : Settings
+        The random poses are uniform within ``search.init_error_deg`` / ``init_error_m`` of the
+        result on every axis.
+    x_opt : ndarray, shape (7,)
+    poses : int
+    rng : Generator or int, optional
+        Seed of the random poses (``search.seed`` when omitted).
+
+    Returns
+    -------
+    dict
+        ``poses``; ``margin_px`` (median random pose's objective minus the result's, mean over
+        frames); ``z`` (that margin over the random poses' spread); ``frames_clear`` (share of
+        frames whose objective at the result beats 95 % of the random poses); ``beaten``
+        (share of (pose, frame) pairs the result beats).
+    """
+    s = settings.search
+    rng = np.random.default_rng(s.seed if rng is None else rng)
+    half = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
+    P = np.tile(_at_full_n(objective, x_opt), (poses + 1, 1))
+    P[1:, :6] += rng.uniform(-1.0, 1.0, (poses, 6)) * half
+    per = _per_frame(objective, P)
+    f0, fr = per[0], per[1:]
+    means = fr.mean(axis=1)
+    spread = float(np.std(means)) or float("nan")
+    beaten = (fr > f0[None, :])
+    return {"poses": int(poses),
+            "margin_px": round(float(np.median(means) - f0.mean()), 4),
+            "z": round(float((np.median(means) - f0.mean()) / spread), 3),
+            "frames_clear": round(float((beaten.mean(axis=0) >= 0.95).mean()), 4),
+            "beaten": round(float(beaten.mean()), 4)}
+
+
+def resolution(objective, x_opt: np.ndarray) -> np.ndarray:
+    """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
+    pixel on average at ``x_opt`` (7,); inf for an axis that does not move them."""
+    step = np.r_[[0.01] * 3, [0.1] * 3]
+    out = np.empty(6)
+    for a in range(6):
+        y = x_opt.copy()
+        y[a] += step[a]
+        px = displacement_px(objective, x_opt, y)
+        out[a] = step[a] / px if px > 0 else np.inf
+    return out
+
+
+def intervals(quality: dict, res_per_px: np.ndarray, settings) -> dict:
+    """Per-axis 95 % intervals of the correction (report units: cm and deg).
+
+    The half-width combines the frames' disagreement (jackknife standard error) with the edge
+    localisation floor (:data:`RESOLUTION_PX` times the axis's pixel resolution): half =
+    Z95 * sqrt(se^2 + (RESOLUTION_PX * res)^2). An axis whose half-width exceeds the stated
+    initial error, or that has no jackknife (one frame), is *not determined* by the data.
+
+    Returns
+    -------
+    dict
+        ``half_width`` per axis (NaN when not determined), ``determined`` per axis, ``units``,
+        and ``undetermined`` (list of axis names). The true extrinsic lies, per axis, within
+        ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width`` (the search's correction axes:
+        translation in the LiDAR frame, ZYX angles).
+    """
+    se = np.array([(quality.get("jackknife_se") or {}).get(a, np.nan) for a in AXES], float)
+    res = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
+    half = Z95 * np.sqrt(se ** 2 + (RESOLUTION_PX * res) ** 2)
+    s = settings.search
+    limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
+    ok = np.isfinite(half) & (half <= limit)
+    return {"units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
+            "half_width": {a: (round(float(h), 4) if k else None)
+                           for a, h, k in zip(AXES, half, ok)},
+            "determined": {a: bool(k) for a, k in zip(AXES, ok)},
+            "undetermined": [a for a, k in zip(AXES, ok) if not k],
+            "resolution_per_px": {a: round(float(v), 5) for a, v in zip(AXES, res)}}
+
+
+def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
+                    quality: dict) -> dict:
+    """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
+    the restart(s), the image-cloud agreement and the intervals (see the module docstring)."""
+    x_opt = local_optimum(objective, x)
+    out = {"contrast": contrast_evidence(objective, settings, x_opt),
+           "intervals": intervals(quality, resolution(objective, x_opt), settings)}
+    if settings.decision.restarts > 0:
+        out["restart"] = restart_evidence(objective, settings, n_min, n_max, x, x_opt)
+    return out
+
+
+def reliability(result: "CalibrationResult") -> dict:
+    """A short verdict on whether to trust ``result``, from what the run already computed.
+
+    ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
+    unreliable: too few frames, few feature points in view at the chosen extrinsic, a
+    correction stopped by a search bound (or a local optimum beyond it), or frames that
+    disagree (jackknife standard errors). Thresholds: the ``RELIABLE_*`` constants.
+    """
+    from .quality import AXES
+
+    reasons = []
+    n_frames = len(result.frames)
+    # Frames passed are not frames that count: one with no feature points in view adds none.
+    useful = (result.feature_counts or {}).get("frames_contributing", n_frames)
+    if n_frames < RELIABLE_MIN_FRAMES:
+        reasons.append(f"only {n_frames} frame(s): too few to average out one scene's biases "
+                       f"(use at least {RELIABLE_MIN_FRAMES})")
+    elif useful < RELIABLE_MIN_FRAMES:
+        reasons.append(f"only {useful} of the {n_frames} frames have LiDAR feature points in "
+                       f"view (at least {MIN_POINTS_PER_FRAME} each): too few to average out "
+                       f"one scene's biases; use at least {RELIABLE_MIN_FRAMES} frames whose "
+                       "clouds and images overlap")
+    in_view = result.objectives().get("in_view")
+    if in_view is not None and in_view < RELIABLE_MIN_IN_VIEW:
+        reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
+                       f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
+    s = result.settings.search
+    bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
+    x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)
+    at_bound = [a for a, v, b in zip(AXES, x, bound)
+                if abs(v) >= (1.0 - RELIABLE_BOUND_MARGIN) * b]
+    if at_bound:
+        reasons.append(f"the correction sits at the search bound on {', '.join(at_bound)} "
+                       f"(+-{s.bound_t:g} m, +-{s.bound_r:g} deg): the optimum may lie "
+                       "outside; if the initial extrinsic may be further off, say so with "
+                       "--init-error, or improve --init")
+    err = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
+    beyond = [a for a, v, e in zip(AXES, x, err) if abs(v) > e and a not in at_bound]
+    if beyond:
+        units = ["cm" if a in ("x", "y", "z") else "deg" for a in beyond]
+        scale = [100.0 if u == "cm" else 1.0 for u in units]
+        moved = ", ".join(f"{a} {abs(x[AXES.index(a)]) * k:.3g} {u}"
+                          for a, u, k in zip(beyond, units, scale))
+        reasons.append(f"the correction lies beyond the stated initial error ({moved}; "
+                       f"--init-error {s.init_error_deg:g},{s.init_error_m:g}): either the "
+                       "start was worse than stated (say so with --init-error) or the frames "
+                       "mislead the objective; check the overlays")
+    q = result.quality or {}
+    step = q.get("step_to_local_optimum")
+    if step is not None:
+        to_si = np.r_[[0.01] * 3, [1.0] * 3]              # the report's cm -> m, deg stays
+        target = x + np.array([step[a] for a in AXES]) * to_si
+        beyond = [a for a, t, b, v in zip(AXES, target, bound, x)
+                  if abs(t) > b and a not in at_bound]
+        if beyond:
+            reasons.append(f"the objective still falls beyond the search bound on "
+                           f"{', '.join(beyond)}: the optimum lies outside the box; widen "
+                           "--bound-t / --bound-r")
+    basin = (result.decision or {}).get("basin") or {}
+    if basin.get("ambiguous"):
+        alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
+        p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]
+        beyond = basin["kept"] == "near"
+        where = ("the result is the optimum next to the initial extrinsic, the other lies "
+                 "beyond the stated --init-error" if beyond else
+                 "the result is the one that fits better")
+        reasons.append(
+            f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
+            f"{basin['frames']} frames: p = {p:.2g}); {where}; add frames with more varied "
+            "structure, or state a smaller --init-error if the start is known to be close")
+    mo = result.motion or {}
+    if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
+        reasons.append(f"the LiDAR moved {mo['skew_m']:.2g} m during a sweep and the motion "
+                       f"could not be compensated ({mo.get('reason')}): moving structure is "
+                       "misplaced by up to half that")
+    rings = (result.feature_counts or {}).get("ring_recovery") or {}
+    if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
+        reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
+                       f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
+                       "field or the LiDAR's pose (lidar_pose) in calib.yaml")
+    se = q.get("jackknife_se") or {}
+    units = q.get("units") or {}
+    se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
+                 default=None)
+    se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
+                default=None)
+    loose = [f"{a} {v:.3g} {units[a]}" for a, v in se.items() if np.isfinite(v) and (
+        (units.get(a) == "deg" and v > RELIABLE_MAX_SE_DEG)
+        or (units.get(a) == "cm" and v > RELIABLE_MAX_SE_CM))]
+    if loose:
+        reasons.append(f"the frames disagree: jackknife standard error {', '.join(loose)} "
+                       f"(limits {RELIABLE_MAX_SE_DEG:g} deg, {RELIABLE_MAX_SE_CM:g} cm)")
+    ev = getattr(result, "evidence", None) or {}
+    rs = ev.get("restart") or {}
+    if rs.get("disagrees"):
+        r = next(r for r in rs["runs"] if r["distinct"])
+        how = ("fits the frames better" if r["mean_px"] > 0 else
+               "fits the frames about as well")
+        reasons.append(f"an independent restart of the search ended {r['separation_deg']:.2g} deg"
+                       f" / {r['separation_cm']:.2g} cm away and {how} ({r['frames_restart_better']}"
+                       f" of {r['frames']} frames prefer it): the frames do not single out one "
+                       "pose; add frames with more varied structure (buildings, poles, cars at "
+                       "several distances), or a better --init with a smaller --init-error")
+    ct = ev.get("contrast") or {}
+    if ct and ct.get("frames_clear", 1.0) < CONTRAST_MIN_FRAMES_CLEAR:
+        reasons.append(f"images and clouds barely agree: in only {100 * ct['frames_clear']:.0f} % "
+                       f"of the frames does the result fit the image edges better than 95 % of "
+                       f"random poses within the stated initial error (at least "
+                       f"{100 * CONTRAST_MIN_FRAMES_CLEAR:.0f} % expected); check that each "
+                       "image belongs to its cloud (same time, same camera) and that the "
+                       "scenes have edges both sensors see")
+    iv = ev.get("intervals")
+    return {
+        "verdict": "unreliable" if reasons else "ok",
+        "reasons": reasons,
+        "intervals": iv,
+        "evidence": {k: v for k, v in ev.items() if k != "intervals"} or None,
+        "frames": n_frames,
+        "in_view": None if in_view is None else round(float(in_view), 4),
+        "at_bound": at_bound,
+        "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
+        "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
+    }
+
+
+def verdict_text(rel: dict) -> str:
+    """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
+    ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
+    reasons = rel.get("reasons") or []
+    if rel.get("verdict") == "ok" or not reasons:
+        return (f"OK: nothing the run measured casts doubt on the result ({rel.get('frames')} "
+                "frames)")
+    more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
+            "result.json)" if len(reasons) > 1 else "")
+    return f"UNRELIABLE: {reasons[0]}{more}"
+
+
