@@ -120,14 +120,16 @@ def _long_focal(frames, k):
     return [dataclasses.replace(f, camera=cam2) for f in frames]
 
 
-def _variant(name):
-    cache = {}
+_VARIANTS: dict = {}
 
+
+def _variant(name):
     def get(work, k):
-        if "frames" not in cache:
+        # One folder per variant, shared by the cases that use it.
+        if name not in _VARIANTS:
             folder, T_ref, _ = build_variant(DATE, name, Path(work) / f"variant_{name}")
-            cache["frames"] = (load_frames(folder), T_ref)
-        fr, T = cache["frames"]
+            _VARIANTS[name] = (load_frames(folder), T_ref)
+        fr, T = _VARIANTS[name]
         return list(fr), T
     return get
 

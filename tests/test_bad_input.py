@@ -567,6 +567,7 @@ def _fake_result(**over):
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
                         feature_counts=over.pop("feature_counts", {}),
+                        evidence=over.pop("evidence", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
                                                             "init_error_deg": deg,
                                                             "init_error_m": m}))
@@ -593,9 +594,24 @@ def _fake_result(**over):
      "the correction lies beyond the stated initial error (y 7.5 cm"),
     ({"x": [0, 0, 0, 0, 1.6, 0], "init_error": (1.0, 0.3)},
      "the correction lies beyond the stated initial error (pitch 1.6 deg"),
+    ({"evidence": {"restart": {"disagrees": True, "runs": [
+        {"distinct": False, "separation_deg": 0.1, "separation_cm": 1.0, "mean_px": 0.0,
+         "frames_restart_better": 2, "frames": 4},
+        {"distinct": True, "separation_deg": 4.0, "separation_cm": 30.0, "mean_px": 0.1,
+         "frames_restart_better": 3, "frames": 4}]}}},
+     "an independent restart of the search ended 4 deg / 30 cm away and fits the frames "
+     "better (3 of 4 frames prefer it)"),
+    ({"evidence": {"restart": {"disagrees": False, "runs": [
+        {"distinct": True, "separation_deg": 4.0, "separation_cm": 30.0, "mean_px": -0.5,
+         "frames_restart_better": 0, "frames": 4}]}}}, None),
+    ({"evidence": {"contrast": {"frames_clear": 0.25, "z": 4.0}}},
+     "images and clouds barely agree: in only 25 % of the frames"),
+    ({"evidence": {"contrast": {"frames_clear": 1.0, "z": 2.4}}},
+     "images and clouds barely agree: the result fits the image edges only 2.4 spreads better"),
+    ({"evidence": {"contrast": {"frames_clear": 0.95, "z": 5.0}}}, None),
 ])
 def test_reliability_reasons(over, reason):
-    from paretocal.pipeline import reliability
+    from paretocal.verdict import reliability
 
     rel = reliability(_fake_result(**over))
     if reason is None:

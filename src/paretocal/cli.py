@@ -263,6 +263,11 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval; error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
+    from .verdict import interval_text
+
+    intervals = interval_text(result.reliability)
+    if intervals:
+        typer.echo(f"paretocal: 95 % intervals of the correction: {intervals}")
     typer.echo(verdict_line(result.reliability))
     if strict and result.reliability["verdict"] != "ok":
         raise typer.Exit(STRICT_EXIT)
@@ -274,7 +279,7 @@ STRICT_EXIT = 3
 
 def verdict_line(reliability: dict) -> str:
     """The CLI's last line: the verdict and its main reason, for a person."""
-    from .pipeline import verdict_text
+    from .verdict import verdict_text
 
     return f"paretocal: verdict {verdict_text(reliability)}"
 

@@ -88,7 +88,7 @@ def pareto_figure(result, path: Path) -> None:
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center")
     rel = getattr(result, "reliability", None)
     if rel:
-        from ..pipeline import verdict_text
+        from ..verdict import verdict_text
 
         ok = rel.get("verdict") == "ok"
         fig.suptitle(textwrap.fill(verdict_text(rel), 40 * panels), fontsize=10,

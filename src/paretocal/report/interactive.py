@@ -328,7 +328,7 @@ def _verdict_banner(result) -> str:
     rel = getattr(result, "reliability", None)
     if not rel:
         return ""
-    from ..pipeline import verdict_text
+    from ..verdict import verdict_text
 
     ok = rel.get("verdict") == "ok"
     items = "" if ok else "<ul>" + "".join(f"<li>{html.escape(r)}</li>"
