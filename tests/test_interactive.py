@@ -115,6 +115,7 @@ class TestPage:
         assert banner and "UNRELIABLE" in banner.group(1)
         assert banner.group(1).count("<li>") == len(result.reliability["reasons"])
         assert "only 2 frame(s)" in banner.group(1)
+        assert "95 % intervals of the correction: x +-" in banner.group(1)
 
     def test_self_contained(self, run):
         _, _, out = run

@@ -328,14 +328,17 @@ def _verdict_banner(result) -> str:
     rel = getattr(result, "reliability", None)
     if not rel:
         return ""
-    from ..verdict import verdict_text
+    from ..verdict import interval_text, verdict_text
 
     ok = rel.get("verdict") == "ok"
     items = "" if ok else "<ul>" + "".join(f"<li>{html.escape(r)}</li>"
                                             for r in rel.get("reasons", [])) + "</ul>"
     head = verdict_text(rel) if ok else "UNRELIABLE: do not use this result as it is"
+    iv = interval_text(rel)
+    iv = "" if iv is None else (f'<div class="intervals">95 % intervals of the correction: '
+                                f"{html.escape(iv)}</div>")
     return (f'<div id="verdict" class="verdict {"ok" if ok else "unreliable"}">'
-            f"{html.escape(head)}{items}</div>")
+            f"{html.escape(head)}{items}{iv}</div>")
 
 
 def write_interactive(result, frames: list[Frame], path: str | Path, frame: int = 0,
