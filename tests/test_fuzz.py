@@ -430,6 +430,92 @@ def test_config_files(work, text):
     s.validate()                                     # what loads is valid
 
 
+#: The allowed values of the string settings.
+CHOICES = {"ring_method": ["auto", "field", "scan", "lines", "elevation"],
+           "edge_weight": ["none", "sqrt_jump"], "chamfer": ["edge-dt", "paper"],
+           "outside": ["mean", "truncation"], "cost": ["model", "psutil"],
+           "evaluator": ["auto", "numba", "numpy"], "engine": ["lean", "pymoo"],
+           "rule": ["knee", "knee-chamfer", "budget", "min-chamfer"], "deskew": ["auto", "off"]}
+
+
+@st.composite
+def settings_docs(draw):
+    """Settings laid out by section with values near the defaults, None where a field allows
+    it (most of them valid; the invalid ones are rejected by the test)."""
+    import dataclasses as dc
+
+    from paretocal.config import _field_types
+
+    base = Settings()
+    doc = {}
+    for f in dc.fields(Settings):
+        current = getattr(base, f.name)
+        if not dc.is_dataclass(current):
+            continue
+        section = {}
+        for name, annotation in _field_types(type(current)).items():
+            if not draw(st.booleans()):
+                continue
+            value = getattr(current, name)
+            kinds = [k.strip() for k in annotation.split("|")]
+            if "None" in kinds and draw(st.integers(0, 3)) == 0:
+                section[name] = None
+                continue
+            kind = kinds[0]
+            if kind == "bool":
+                section[name] = draw(st.booleans())
+            elif kind == "int":
+                section[name] = max(1, int(value or 1) + draw(st.integers(-2, 5)))
+            elif kind == "float":
+                ref = value if value not in (None, 0.0) else 1.0
+                section[name] = float(ref) * draw(st.floats(0.25, 2.0))
+            elif kind == "str":
+                section[name] = draw(st.sampled_from(CHOICES.get(name, [value])))
+            elif kind.startswith("tuple"):
+                section[name] = [draw(st.integers(1, 16)), draw(st.integers(1, 16))]
+        doc[f.name] = section
+    if draw(st.booleans()):
+        doc["frames"] = draw(st.sampled_from([None, "0:5", "0,3,7"]))
+    return doc
+
+
+@FUZZ
+@given(settings_docs())
+def test_settings_round_trip_exactly(doc):
+    """Any valid settings -> dict -> YAML -> settings is equal (None included: a saved run
+    reloads as the same run, a batch worker gets the settings it was sent)."""
+    from hypothesis import assume
+
+    from paretocal.config import settings_from_mapping
+
+    try:
+        s = settings_from_mapping(doc)
+    except ParetocalError:
+        assume(False)
+    for section, values in doc.items():                 # what the file says is what loads
+        if isinstance(values, dict):
+            for key, value in values.items():
+                got = getattr(getattr(s, section), key)
+                assert (got is None) if value is None else got == pytest.approx(
+                    tuple(value) if isinstance(value, list) else value), (section, key)
+        else:
+            assert getattr(s, section) == values
+    text = yaml.safe_dump(s.to_dict(), sort_keys=False)
+    again = settings_from_mapping(yaml.safe_load(text))
+    assert again == s
+    assert again.to_dict() == s.to_dict()
+
+
+def test_null_turns_the_seed_grid_off(work):
+    p = work / "nogrid.yaml"
+    p.write_text("search:\n  seed_grid_deg: null\n  bound_t_m: null\n")
+    s = load_settings(p)
+    assert s.search.seed_grid_deg is None and s.search.bound_t_m is None
+    # The command line's "not given" stays "keep the current value".
+    assert s.replace(search={"seed_grid_deg": None}).search.seed_grid_deg is None
+    assert Settings().replace(search={"seed_grid_deg": None}).search.seed_grid_deg == 2.5
+
+
 # --- geometry -------------------------------------------------------------------------------------
 
 corrections = st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-5, 5),

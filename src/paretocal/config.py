@@ -155,11 +155,18 @@ class Settings:
     camera: int = 2
     frames: str | None = None
 
-    def replace(self, **sections: dict[str, Any]) -> "Settings":
-        """A copy with some fields of some sections replaced (``None`` values are ignored)."""
+    def replace(self, keep_none: bool = False, **sections: dict[str, Any]) -> "Settings":
+        """A copy with some fields of some sections replaced.
+
+        ``None`` values are ignored (an option not given on the command line), unless
+        ``keep_none``: then ``None`` is a value like any other, for the fields that allow it
+        (``seed_grid_deg: null`` turns the seed grid off). Configuration files, saved runs and
+        batch workers read settings with ``keep_none`` (see :func:`settings_from_mapping`).
+        """
         out = self
         for name, values in sections.items():
-            values = {k: v for k, v in values.items() if v is not None}
+            if not keep_none:
+                values = {k: v for k, v in values.items() if v is not None}
             if not values:
                 continue
             current = getattr(out, name, None)
@@ -381,7 +388,7 @@ def settings_from_mapping(data: dict, name: str = "settings",
             raise SettingsError(f"{name}: {k!r} is a single value, not a section")
         (sections if is_section else scalars)[k] = v
     try:
-        settings = settings.replace(**sections)
+        settings = settings.replace(keep_none=True, **sections)
         scalars = {k: _coerce(k, v, types[k]) for k, v in scalars.items()}
         if scalars:
             settings = dataclasses.replace(settings, **scalars)
