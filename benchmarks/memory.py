@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/memory.py [--cloud concat|repeat] [--scans 18] [--pop 16] [--gens 3]
                                           [--json runs/memory.json]
 
-Builds two generic-layout folders (INTERFACES.md 2c) in a temporary directory, each with one
+Builds two generic-layout folders (docs/conventions.md section 2c) in a temporary directory, each with one
 frame: the first KITTI scan alone (about 114 000 points), and a cloud of about 2 million points
 (``concat``: the first 18 scans concatenated, about 2.04 M points; ``repeat``: the first scan
 repeated 18 times with 1 cm Gaussian jitter). For each, in a fresh process:

@@ -10,7 +10,7 @@ import yaml
 
 
 def write_generic(root: Path, frames, suffix: str = ".bin", D=None, with_T: bool = True) -> Path:
-    """A generic-layout folder (INTERFACES.md 2c) holding copies of ``frames`` in a temp dir."""
+    """A generic-layout folder (docs/conventions.md section 2c) holding copies of ``frames`` in a temp dir."""
     (root / "images").mkdir(parents=True, exist_ok=True)
     (root / "points").mkdir(parents=True, exist_ok=True)
     f0 = frames[0]

@@ -21,9 +21,9 @@ Three models, each the usual formulation of its name:
     ``x = Xs_x / (Xs_z + xi)``, ``y = Xs_y / (Xs_z + xi)``, then the radial-tangential step
     above with ``D = k1 k2 p1 p2 [k3]``.
 
-All then apply ``K``: ``u = fx xd + s yd + cx``, ``v = fy yd + cy``. Pixels follow INTERFACES.md:
-``(u, v)`` with the origin at the centre of the top-left pixel, so a point is in the image when
-``0 <= u <= width - 1`` and ``0 <= v <= height - 1``.
+All then apply ``K``: ``u = fx xd + s yd + cx``, ``v = fy yd + cy``. Pixels follow
+docs/conventions.md section 1: ``(u, v)`` with the origin at the centre of the top-left pixel,
+so a point is in the image when ``0 <= u <= width - 1`` and ``0 <= v <= height - 1``.
 
 A point is *valid* when it is in the model's domain: farther than ``z_min`` (along the optical
 axis for the pinhole, in range for the others) and where the model is one-to-one. A distortion

@@ -1,6 +1,6 @@
 """Rigid-body geometry: ZYX Euler rotations, SE(3) algebra, the search correction, pose errors.
 
-Conventions (INTERFACES.md section 1): ``T_cam_lidar`` maps LiDAR points into the camera frame,
+Conventions (docs/conventions.md section 1): ``T_cam_lidar`` maps LiDAR points into the camera frame,
 and the search variables form a correction applied in the LiDAR frame,
 ``T = T_init @ D(x, y, z, yaw, pitch, roll)`` with ``D = [Rz(yaw) Ry(pitch) Rx(roll) | (x, y, z)]``.
 Angles are in degrees in every public function; translations in metres.
@@ -115,7 +115,7 @@ def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
 
 
 def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
-    """Error of estimated extrinsics against a reference (INTERFACES.md section 1).
+    """Error of estimated extrinsics against a reference (docs/conventions.md section 1).
 
     Parameters
     ----------

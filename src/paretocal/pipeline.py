@@ -129,7 +129,7 @@ class CalibrationResult:
         return out
 
     def to_dict(self) -> dict:
-        """The ``result.json`` document (INTERFACES.md section 4)."""
+        """The ``result.json`` document (docs/conventions.md section 3)."""
         return {
             "T_cam_lidar": self.T_cam_lidar.tolist(),
             "T_init": self.T_init.tolist(),
@@ -505,7 +505,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     Parameters
     ----------
     source : path or list of Frame
-        A dataset folder (any layout of INTERFACES.md section 2) or frames already loaded.
+        A dataset folder (any layout of docs/conventions.md section 2) or frames already loaded.
     T_init : ndarray, shape (4, 4), optional
         Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
     settings : Settings, optional

@@ -78,7 +78,7 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                    intensity_jump: float = 0.5, min_range_m: float = 1.5,
                    max_range_m: float = 70.0, max_gap_deg: float | None = None,
                    smooth_ratio: float = 1.0, ring_method: str = "auto",
-                   along_fraction: float = 0.5, cross_fraction: float = 0.5,
+                   along_fraction: float = 0.5, cross_fraction: float = 0.25,
                    edge_support: bool = False, edge_contour: bool = False,
                    rng: np.random.Generator | int | None = 0,
                    ring: np.ndarray | Rings | None = None,
@@ -123,7 +123,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
         Used when ``ring`` is not given.
     along_fraction, cross_fraction : float
         Where an edge point is placed between the near ray and its far neighbour (0 = on the
-        near ray, 0.5 = midway), along a ring and across rings.
+        near ray, 0.5 = midway), along a ring and across rings (the defaults are those of
+        ``FeatureSettings``: midway along a ring, a quarter of the way across rings).
     edge_support : bool
         Keep a depth edge only when its near return continues a surface: the next two returns
         on the other side (along the ring, or on the two rings on the other side across

@@ -1,4 +1,4 @@
-"""The three input layouts of INTERFACES.md section 2, detected from the source folder.
+"""The three input layouts of docs/conventions.md section 2, detected from the source folder.
 
 Each layout lists its frames (stem -> image path, points path) and knows the camera and the
 dataset's own extrinsic; :func:`load_frames` selects and reads the frames.
@@ -523,7 +523,7 @@ def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) 
     ----------
     source : path
         A KITTI raw drive (or date) folder, a KITTI object ``training`` folder, or a generic
-        folder with ``calib.yaml`` (INTERFACES.md section 2).
+        folder with ``calib.yaml`` (docs/conventions.md section 2).
     frames : str, optional
         Selection spec (``0:10``, ``0,3,7``, stems); all frames by default.
     camera : int
