@@ -160,6 +160,11 @@ class TestCombine:
         X[:, 6] = [20, 100, 300]
         se = obj.chamfer(X)["se"]
         assert se[0] > se[1] > se[2] > 0
+        # A per-call multiplier: 0 gives the plain mean, and the objective keeps its own.
+        plain = obj.chamfer(X, ucb_k=0.0)
+        charged = obj.chamfer(X)
+        np.testing.assert_allclose(charged["f1"], plain["f1"] + 4.0 * plain["se"], rtol=1e-9)
+        assert obj.ucb_k == 4.0
 
 
 class TestPaperChamfer:

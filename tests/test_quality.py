@@ -13,7 +13,7 @@ class QuadraticFrames:
         self.ucb_k = 0.0
         self.scene = type("S", (), {"points_per_frame": np.array([100])})()
 
-    def chamfer(self, X):
+    def chamfer(self, X, ucb_k=None):
         d = X[:, None, :6] - self.m[None]               # (C, F, 6)
         per = np.einsum("cfi,ij,cfj->cf", d, self.H, d)
         return {"f1": per.mean(axis=1), "per_frame": per}

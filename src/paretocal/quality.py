@@ -76,12 +76,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     S = _fd_stencil(h)
     cand = np.tile(x, (len(S), 1))
     cand[:, :6] += S
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        per_frame = objective.chamfer(cand)["per_frame"]              # (28, F)
-    finally:
-        objective.ucb_k = saved
+    per_frame = objective.chamfer(cand, ucb_k=0.0)["per_frame"]              # (28, F)
     F = per_frame.shape[1]
     g, H = _derivatives(per_frame.mean(axis=1), h)
     curv = np.diag(H)
@@ -127,12 +122,7 @@ def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[flo
     grid = grid[np.any(grid != 0, axis=1)]
     cand = np.tile(x, (len(grid) + 1, 1))
     cand[1:, :6] += grid * delta
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        f = objective.chamfer(cand)["f1"]
-    finally:
-        objective.ucb_k = saved
+    f = objective.chamfer(cand, ucb_k=0.0)["f1"]
     better = f[1:] < f[0]
     return float(better.mean()), float(max(0.0, f[0] - f[1:].min()))
 
@@ -143,14 +133,9 @@ def local_optimum(objective, x: np.ndarray, iters: int = 15):
 
     x = np.array(x, dtype=np.float64, copy=True)
     x[6] = int(objective.scene.points_per_frame.max())
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
-        Z, _, _ = newton_polish(fun, x[None], iters=iters)
-        Z, _, _ = polish(fun, Z, step=np.array([0.005] * 3 + [0.05] * 3))
-    finally:
-        objective.ucb_k = saved
+    fun = lambda Z: objective.chamfer(Z, ucb_k=0.0)["f1"]  # noqa: E731
+    Z, _, _ = newton_polish(fun, x[None], iters=iters)
+    Z, _, _ = polish(fun, Z, step=np.array([0.005] * 3 + [0.05] * 3))
     return Z[0]
 
 

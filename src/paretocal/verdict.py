@@ -87,12 +87,7 @@ RESOLUTION_PX = 2.5
 
 def _per_frame(objective, X: np.ndarray) -> np.ndarray:
     """Per-frame objective (C, F) of the candidates X (C, 7), without the sampling charge."""
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        return np.asarray(objective.chamfer(X)["per_frame"], dtype=np.float64)
-    finally:
-        objective.ucb_k = saved
+    return np.asarray(objective.chamfer(X, ucb_k=0.0)["per_frame"], dtype=np.float64)
 
 
 def _at_full_n(objective, x: np.ndarray) -> np.ndarray:
@@ -195,12 +190,7 @@ def contrast_evidence(objective, settings, x_opt: np.ndarray, poses: int = CONTR
     half = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
     P = np.tile(_at_full_n(objective, x_opt), (poses + 1, 1))
     P[1:, :6] += rng.uniform(-1.0, 1.0, (poses, 6)) * half
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        out = objective.chamfer(P)
-    finally:
-        objective.ucb_k = saved
+    out = objective.chamfer(P, ucb_k=0.0)
     per = np.asarray(out["per_frame"], dtype=np.float64)
     groups = np.asarray(out["mean"], dtype=np.float64)                  # (poses + 1, G)
     f0, fr = per[0], per[1:]

@@ -46,8 +46,11 @@ class CalibrationObjective:
         """Candidate extrinsics ``T_init @ D``, shape (C, 4, 4)."""
         return apply_correction(self.T_init, np.asarray(X, dtype=np.float64)[:, :6])
 
-    def chamfer(self, X: np.ndarray) -> dict[str, np.ndarray]:
+    def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
         """First objective and its parts for candidates X, shape (C, 7).
+
+        ``ucb_k`` overrides the sampling-error multiplier for this call (0: the plain mean over
+        the points, as the quality report, the verdict and the basin test read it).
 
         Returns ``f1`` (C,), ``mean`` (C, G) per-group mean cost (px), ``se`` (C,) sampling
         error and ``in_view`` (C,) fraction of the evaluated points that landed in the image.
@@ -58,7 +61,8 @@ class CalibrationObjective:
         self.evaluations += len(X)
         S1, S2, n_in = self.sums(self.scene, T, n)
         W1, W2 = self.scene.group_weights(n)
-        out = combine(S1, S2, W1, W2, self.scene.outside, self.weights, self.ucb_k)
+        k = self.ucb_k if ucb_k is None else float(ucb_k)
+        out = combine(S1, S2, W1, W2, self.scene.outside, self.weights, k)
         out["in_view"] = n_in.sum(axis=1) / np.maximum(self.scene.points_used(n), 1)
         if self.settings.chamfer == "paper":
             out["f1"] = paper_chamfer(self.scene, self.edge_uv, T, n)

@@ -49,12 +49,7 @@ def paired_preference(objective, near: np.ndarray, far: np.ndarray) -> dict:
     """
     from scipy.stats import t as student_t
 
-    saved = objective.ucb_k
-    objective.ucb_k = 0.0
-    try:
-        per = objective.chamfer(np.vstack([near, far]))["per_frame"]          # (2, F)
-    finally:
-        objective.ucb_k = saved
+    per = objective.chamfer(np.vstack([near, far]), ucb_k=0.0)["per_frame"]          # (2, F)
     d = per[0] - per[1]
     k = len(d)
     mean = float(d.mean())
