@@ -331,3 +331,19 @@ def test_page_projects_through_the_lens_model_in_browser(request, tmp_path):
                 page.close()
         finally:
             browser.close()
+
+
+def test_importing_the_figures_leaves_matplotlib_alone(tmp_path):
+    """The report draws on Figure objects: importing it must not switch a user's backend (a
+    notebook's inline one, an application's Qt one) nor need pyplot."""
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; matplotlib.use('svg'); import paretocal.report.figures as f; "
+            "import paretocal.report.study_figures, paretocal.report.fleet; "
+            "assert matplotlib.get_backend() == 'svg', matplotlib.get_backend(); "
+            "import sys; assert 'matplotlib.pyplot' not in sys.modules; "
+            "fig, ax = f.subplots(1, 2, figsize=(4, 2)); ax[0].plot([0, 1]); "
+            f"f._save(fig, {str(tmp_path / 'x.png')!r})")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert (tmp_path / "x.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -5,23 +5,31 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..camera import project  # noqa: E402
-from ..io.atomic import atomic_path  # noqa: E402
-from ..io.frame import Frame  # noqa: E402
+from ..camera import project
+from ..io.atomic import atomic_path
+from ..io.frame import Frame
 
 KITTI_CREDIT = "data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0"
+
+
+def new_figure(figsize=None, dpi=None) -> Figure:
+    """A matplotlib Figure of its own: no pyplot, no global backend or figure registry, so
+    importing paretocal leaves a notebook's or an application's matplotlib set-up alone."""
+    return Figure(figsize=figsize, dpi=dpi)
+
+
+def subplots(nrows: int = 1, ncols: int = 1, figsize=None, dpi=None, **kw):
+    """``(figure, axes)`` like ``pyplot.subplots``, on a :func:`new_figure`."""
+    fig = new_figure(figsize, dpi)
+    return fig, fig.subplots(nrows, ncols, **kw)
 
 
 def _save(fig, path: Path, dpi: int = 120) -> None:
     with atomic_path(Path(path)) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
-    plt.close(fig)
 
 
 def pareto_figure(result, path: Path) -> None:
@@ -32,7 +40,7 @@ def pareto_figure(result, path: Path) -> None:
     F, cols = front.F, front.columns
     has_ref = "ref_rotation_deg" in cols
     panels = 3 if has_ref else 2
-    fig, axes = plt.subplots(1, panels, figsize=(5.6 * panels, 4.6))
+    fig, axes = subplots(1, panels, figsize=(5.6 * panels, 4.6))
     i = result.chosen
     ax = axes[0]
     if result.nsga_front is not None:
@@ -118,7 +126,7 @@ def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
                    z_min: float = 0.1, max_depth: float = 30.0) -> None:
     """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
     h, w = frame.image.shape[:2]
-    fig = plt.figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
+    fig = new_figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
     ax = fig.add_axes([0, 0, 1, h / (h + 45)])
     k = draw_overlay(ax, frame, T, z_min, max_depth)
     fig.text(0.01, 1 - 0.3 * 45 / (h + 45), title, fontsize=11, va="center")

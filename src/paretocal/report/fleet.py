@@ -6,19 +6,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import _save, plt
+from matplotlib import colormaps
+
+from .figures import _save, subplots
 
 
 def fleet_figure(rows: list[dict], path: Path) -> None:
     """Rotation and translation drift (calibrated vs initial extrinsic) per entry, one line per
     vehicle in manifest order; entries whose initial extrinsic was checked miscalibrated are
     ringed, failed entries marked on the axis."""
-    fig, axes = plt.subplots(1, 2, figsize=(12.5, 4.4))
+    fig, axes = subplots(1, 2, figsize=(12.5, 4.4))
     vehicles = sorted({str(r["vehicle"] or r["id"]) for r in rows})
     for k, v in enumerate(vehicles):
         rs = [r for r in rows if str(r["vehicle"] or r["id"]) == v]
         xs = np.arange(len(rs))
-        colour = plt.cm.tab10(k % 10)
+        colour = colormaps["tab10"](k % 10)
         for ax, key in zip(axes, ("drift_rotation_deg", "drift_translation_cm")):
             ok = [i for i, r in enumerate(rs) if r["status"] == "ok"]
             y = [rs[i][key] for i in ok]

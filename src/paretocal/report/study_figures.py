@@ -6,7 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import KITTI_CREDIT, _save, draw_overlay, plt
+from matplotlib.colors import Normalize
+
+from .figures import KITTI_CREDIT, _save, draw_overlay, new_figure, subplots
 
 STAR = dict(s=240, marker="*", color="tab:red", edgecolor="k", zorder=5)
 
@@ -21,7 +23,7 @@ def pareto_front(result, path: Path) -> None:
     error when known; beside it, each solution's reference errors (or its deviation) vs cost."""
     F, cols, i = result.front.F, result.front.columns, result.chosen
     has_ref = "ref_rotation_deg" in cols
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12.5, 4.8))
+    fig, (a, b) = subplots(1, 2, figsize=(12.5, 4.8))
     _, Fn = result.nsga_front
     a.scatter(Fn[:, 1], Fn[:, 0], s=16, marker="x", color="0.6", lw=0.8,
               label=f"NSGA-II front before polish ({len(Fn)})")
@@ -71,8 +73,8 @@ def solution_space(result, path: Path) -> None:
     """The Pareto set's translations (cm) and rotations (deg) in 3-D, coloured by n."""
     X = result.front.X
     Xn, _ = result.nsga_front
-    fig = plt.figure(figsize=(12.5, 5.4))
-    norm = plt.Normalize(np.log10(max(X[:, 6].min(), 1)), np.log10(X[:, 6].max()) + 1e-9)
+    fig = new_figure(figsize=(12.5, 5.4))
+    norm = Normalize(np.log10(max(X[:, 6].min(), 1)), np.log10(X[:, 6].max()) + 1e-9)
     for k, (cols, unit, scale, title) in enumerate(
             (((0, 1, 2), "cm", 100.0, "translation correction"),
              ((3, 4, 5), "deg", 1.0, "rotation correction"))):
@@ -97,7 +99,7 @@ def solution_space(result, path: Path) -> None:
 
 def single_objective(so: dict, path: Path) -> None:
     """Convergence of the Chamfer-only runs: DE per generation, then Powell per iteration."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12.5, 4.6))
+    fig, (a, b) = subplots(1, 2, figsize=(12.5, 4.6))
     h = so["de_history"]
     ev = [r["evaluations"] for r in h]
     a.plot(ev, [r["best_f1"] for r in h], "-", color="tab:blue", label="DE best")
@@ -129,7 +131,7 @@ def single_objective(so: dict, path: Path) -> None:
 def epsilon_constraint(result, rows: list[dict], path: Path) -> None:
     """The epsilon-constraint solutions over the NSGA-II front, and their gap to it."""
     F = result.front.F
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12.5, 4.6), gridspec_kw={"width_ratios": [3, 2]})
+    fig, (a, b) = subplots(1, 2, figsize=(12.5, 4.6), gridspec_kw={"width_ratios": [3, 2]})
     _front_line(a, F, color="tab:blue", lw=1, marker="o", ms=3.5, label="NSGA-II front (final)")
     ok = [r for r in rows if r.get("feasible")]
     for r in rows:
@@ -168,7 +170,7 @@ def decision(result, path: Path) -> dict:
     dev = cols["deviation_px"]
     cand, Fd = knee_candidates(F, dev, result.settings.decision.max_deviation_px)
     region = [int(cand[j]) for j in knee_region(Fd[cand])] if len(cand) >= 3 else []
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12.5, 4.6))
+    fig, (a, b) = subplots(1, 2, figsize=(12.5, 4.6))
     a.plot(F[:, 1], dev + 0.1, "o", ms=4, color="0.7", label="front solutions")
     o = cand[np.argsort(F[cand, 1])]
     a.plot(F[o, 1], dev[o] + 0.1, "o-", ms=4, color="tab:purple", lw=1,
@@ -204,7 +206,7 @@ def projections(frame, result, path: Path, max_depth: float = 30.0) -> None:
     if result.T_ref is not None:
         rows.append(("dataset reference extrinsic", result.T_ref))
     h, w = frame.image.shape[:2]
-    fig, axes = plt.subplots(len(rows), 1, figsize=(w / 100, len(rows) * (h / 100 + 0.35)))
+    fig, axes = subplots(len(rows), 1, figsize=(w / 100, len(rows) * (h / 100 + 0.35)))
     for ax, (title, T) in zip(axes, rows):
         k = draw_overlay(ax, frame, T, result.settings.features.z_min, max_depth)
         ax.set_title(f"{title}: {k} points in view", fontsize=10, loc="left")
@@ -218,7 +220,7 @@ def innovization(X: np.ndarray, F: np.ndarray, corr: list[dict], fits: dict, pat
     """Rank correlations, and the fitted trends of f1, f2 and the pose against n."""
     from ..search.problem import VARIABLES
 
-    fig, axes = plt.subplots(2, 2, figsize=(12.5, 8.6))
+    fig, axes = subplots(2, 2, figsize=(12.5, 8.6))
     a = axes[0, 0]
     M = np.array([[next(r["spearman"] for r in corr if r["variable"] == v and r["objective"] == o)
                    for o in ("f1", "f2")] for v in VARIABLES])
@@ -278,7 +280,7 @@ def robustness(rows: list[dict], summary: dict, path: Path) -> None:
     if has_ref:
         panels += [("rotation_deg", "rotation error vs reference (deg, log)"),
                    ("translation_cm", "translation error vs reference (cm, log)")]
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.2))
+    fig, axes = subplots(1, len(panels), figsize=(4.6 * len(panels), 4.2))
     axes = np.atleast_1d(axes)
     w = np.array([r["w1"] for r in rows])
     ws = sorted(set(w))
