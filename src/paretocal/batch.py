@@ -157,9 +157,9 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
     try:
-        import numba
+        from .objective.kernel import set_threads
 
-        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+        set_threads(threads)
         record = _calibrate_entry(entry, settings, run_dir, check, figures)
         record.update({"wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()})
     except ParetocalError as exc:
