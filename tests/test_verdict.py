@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from paretocal.config import Settings
-from paretocal.pipeline import _Stage
+from paretocal.stage import Stage
 from paretocal.quality import AXES
 from paretocal.verdict import (RESOLUTION_PX, Z95, contrast_evidence, interval_text, intervals, resolution,
                                restart_evidence)
@@ -20,7 +20,7 @@ SETTINGS = Settings().replace(search={"pop": 60, "gens": 30},
 def stage(raw_frames):
     frames = raw_frames[:6]
     T = frames[0].T_ref
-    return _Stage(frames, T, T, SETTINGS)
+    return Stage(frames, T, T, SETTINGS)
 
 
 def _full(stage, x6):
@@ -73,7 +73,7 @@ def test_images_of_other_frames_do_not_agree_with_the_clouds(raw_frames):
                              for f in frames]}
     out = {}
     for name, fr in cases.items():
-        st = _Stage(fr, T, T, SETTINGS)
+        st = Stage(fr, T, T, SETTINGS)
         x = local_optimum(st.objective, _full(st, np.zeros(6)))
         out[name] = contrast_evidence(st.objective, SETTINGS, x, rng=3)
     assert out["right"]["z"] > CONTRAST_MIN_Z + 1.0 and out["right"]["frames_clear"] == 1.0, out

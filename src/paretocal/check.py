@@ -39,7 +39,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         check itself has too little to go on (fewer frames than a calibration needs to be
         trusted), with what to do.
     """
-    from .pipeline import _Stage
+    from .stage import Stage
 
     settings = (settings or Settings()).validate()
     T = np.asarray(T, dtype=np.float64)
@@ -47,7 +47,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         if progress is not None:
             progress(stage, done, total)
 
-    stage = _Stage(frames, T, T, settings, lambda d, t: tick("features", d, t))
+    stage = Stage(frames, T, T, settings, lambda d, t: tick("features", d, t))
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max

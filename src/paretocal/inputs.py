@@ -1,0 +1,244 @@
+"""The frames as the objective needs them: the initial extrinsic, the LiDAR located in its cloud,
+the laser rings of every sweep, motion during the sweeps compensated, and what the input files
+offered (result.json ``inputs``)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from .config import Settings
+from .errors import InputError
+from .features.prepare import frame_rings
+from .features.rings import MIN_PURITY, MIN_RINGS, Rings
+from .io.frame import Frame
+
+log = logging.getLogger(__name__)
+
+
+def resolve_init(frames: list[Frame], T_init: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The initial extrinsic and the reference: ``--init`` wins; the dataset's is the fallback.
+
+    The reference is returned only when an initial guess was given independently of it, so the
+    reported error is never trivially zero.
+    """
+    T_ref = frames[0].T_ref
+    if T_ref is not None and any(f.T_ref is None or not np.allclose(f.T_ref, T_ref, atol=1e-9)
+                                 for f in frames):
+        log.warning("frames carry different reference extrinsics; the first frame's is used")
+    if T_init is None:
+        if T_ref is None:
+            raise InputError("no initial extrinsic: the source has no T_cam_lidar; pass --init")
+        return T_ref.copy(), None
+    return np.asarray(T_init, dtype=np.float64), T_ref
+
+
+def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Frame], dict]:
+    """De-skew every sweep to its image time with ego-motion estimated from the sequence.
+
+    A spinning LiDAR on a moving vehicle stores each point at its own time (a 10 Hz sweep at
+    30 m/s spans 3 m); the image is exposed at one time. When every cloud has per-point time,
+    the twist is estimated by registering consecutive sweeps (:func:`paretocal.motion.
+    estimate_motion`) and each sweep is expressed at its centre time plus
+    ``settings.motion.time_offset_s``. The motion is applied only when the registration
+    constrains it along every axis; otherwise the sweeps stay as recorded and the returned
+    record says why.
+
+    Returns
+    -------
+    frames : list of Frame
+        De-skewed copies (points in the same order), or the input frames.
+    info : dict
+        ``compensated`` (bool), ``reason`` (when not), the estimate's figures, and
+        ``max_shift_m``: the largest displacement the de-skew applied to a point.
+    """
+    import dataclasses
+
+    from . import motion as mo
+
+    m = settings.motion
+    if m.deskew == "off":
+        return frames, {"compensated": False, "reason": "de-skewing is off (motion.deskew)"}
+    if any(f.time is None for f in frames):
+        return frames, {"compensated": False,
+                        "reason": "the clouds carry no per-point time: motion during a sweep "
+                                  "is not compensated (a moving vehicle's clouds are skewed)"}
+    if len(frames) < 2:
+        return frames, {"compensated": False,
+                        "reason": "one frame: ego-motion needs a sequence of sweeps"}
+    order = np.argsort([float(np.median(f.time)) for f in frames], kind="stable")
+    clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), frames[k].time)
+              for k in order]
+    try:
+        est = mo.estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
+                                 seed=settings.search.seed)
+    except ValueError as exc:
+        return frames, {"compensated": False, "reason": f"ego-motion estimate failed: {exc}"}
+    info = {"speed_mps": round(float(est.speed), 3),
+            "speed_spread_mps": round(float(est.speed_spread), 3),
+            "v_mps": [round(float(v), 3) for v in est.twist.v],
+            "yaw_rate_dps": round(float(np.degrees(est.twist.w[2])), 3),
+            "observable_xyz": [bool(v) for v in est.observable],
+            "median_share_xyz": [round(float(v), 4) for v in np.median(est.share, axis=0)],
+            "time_offset_s": m.time_offset_s}
+    sweep = max(float(np.ptp(f.time)) for f in frames)
+    info["skew_m"] = round(float(est.speed) * sweep, 3)
+    if not est.compensable:
+        axes = "".join(a for a, ok in zip("xyz", est.observable) if not ok)
+        info.update(compensated=False,
+                    reason=f"ego-motion is not observable along {axes} (the scene does not "
+                           "constrain scan-to-scan registration there): not compensated")
+        return frames, info
+    out = list(frames)
+    shift = 0.0
+    for j, k in enumerate(order):
+        f = frames[k]
+        t_ref = mo.sweep_centre(f.time) + m.time_offset_s
+        xyz = mo.deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
+        shift = max(shift, float(np.max(np.linalg.norm(xyz - f.points[:, :3], axis=1))))
+        pts = f.points.copy()
+        pts[:, :3] = xyz
+        out[k] = dataclasses.replace(f, points=np.ascontiguousarray(pts, dtype=np.float32))
+    info.update(compensated=True, max_shift_m=round(shift, 3))
+    log.info("de-skewed %d sweeps: %.2f m/s, largest shift %.2f m", len(frames), est.speed,
+             shift)
+    return out, info
+
+
+def warn_unlocated(frames: list[Frame], info: dict) -> None:
+    """Tell the user when the LiDAR's pose is needed and could not be found (``info`` from
+    :func:`locate_lidar`); called after the input checks so that bad input reads one line."""
+    if info.get("source") != "unknown":
+        return
+    log.warning("%s: the returns do not lie on rings about the cloud's origin and the LiDAR's "
+                "pose could not be estimated (%s); rings and edges are taken about the cloud's "
+                "origin and may be poor: give lidar_pose in calib.yaml", frames[0].points_path,
+                info.get("reason", ""))
+
+
+def locate_lidar(frames: list[Frame],
+                 settings: Settings) -> tuple[list[Frame], dict, Rings | None]:
+    """The LiDAR's pose in the clouds' frame: given, not needed, or estimated from a sweep.
+
+    Ring geometry is taken about the sensor's own origin and axis. A pose in calib.yaml
+    (``lidar_pose``) is used as given; a cloud with a ring field, or whose rings fit the line
+    model about its own origin, needs none. Otherwise (a cloud stored in a vehicle frame) the
+    pose is estimated from the first sweep
+    (:func:`~paretocal.features.sensor.estimate_sensor_pose`) and, when the rings fit the line
+    model in the estimated frame, given to every frame (one rig, one mount).
+
+    Returns
+    -------
+    frames : list of Frame
+        With ``sensor_pose`` set when it was estimated.
+    info : dict
+        ``source``: "calib.yaml", "ring field", "cloud origin", "estimated" or "unknown",
+        with the estimate's summary and the rings' purity where they were checked.
+    first_rings : Rings or None
+        The first frame's rings about the pose returned, when they were recovered here (for
+        :func:`sweep_rings`, which then need not recover them again).
+    """
+    import dataclasses
+
+    from .features.sensor import estimate_sensor_pose
+
+    if any(f.sensor_pose is not None for f in frames):
+        return frames, {"source": "calib.yaml"}, None
+    if settings.features.ring_method in ("field", "scan", "elevation"):
+        return frames, {"source": "cloud origin", "note": "ring method "
+                        f"{settings.features.ring_method!r} asked for"}, None
+    first = frames[0]
+    if first.ring is not None:
+        return frames, {"source": "ring field"}, None
+    rng = np.random.default_rng(np.random.SeedSequence([settings.search.seed, 2]))
+    here = frame_rings(first, settings.features, rng)
+    if here.purity >= MIN_PURITY and here.n_rings >= MIN_RINGS:
+        return frames, {"source": "cloud origin", "purity": round(float(here.purity), 4)}, here
+    est = estimate_sensor_pose(first.points, rng)
+    if est is None or not est.ok:
+        why = "no ground plane to start from" if est is None else "; ".join(est.notes)
+        return frames, {"source": "unknown", "purity_at_origin": round(float(here.purity), 4),
+                        "estimate": None if est is None else est.summary(), "reason": why}, here
+    moved = [dataclasses.replace(f, sensor_pose=est.pose) for f in frames]
+    there = frame_rings(moved[0], settings.features, rng)
+    info = {"source": "estimated", "estimate": est.summary(),
+            "purity_at_origin": round(float(here.purity), 4),
+            "purity": round(float(there.purity), 4), "n_rings": int(there.n_rings)}
+    if there.purity < MIN_PURITY or there.n_rings < MIN_RINGS:
+        info.update(source="unknown", reason="the rings do not fit the line model in the "
+                    "estimated frame either")
+        return frames, info, here
+    p = est.pose[:3, 3]
+    log.info("%s: the LiDAR's pose was estimated from the sweep: at (%.2f, %.2f, %.2f) m in "
+             "the cloud's frame, axis tilted %.2f deg (%d rings, purity %.3f); give "
+             "lidar_pose in calib.yaml to set it", first.points_path, p[0], p[1], p[2],
+             est.tilt_deg, there.n_rings, there.purity)
+    return moved, info, there
+
+
+def sweep_rings(frames: list[Frame], settings: Settings,
+                first: Rings | None = None) -> list[Rings]:
+    """The rings of every frame's sweep (see :func:`~paretocal.features.prepare.frame_rings`);
+    :func:`warn_rings` tells the user about the implausible ones.
+
+    One sensor keeps its lasers' lines from sweep to sweep: once a sweep's rings were found
+    by the line search and are plausible, the next sweeps are labelled with its line model
+    first (measured on the KITTI drive in firing and random order: 0.4 s a sweep instead of
+    1.5-2.7 s, every point on its true ring as before); a sweep the model does not fit is
+    searched afresh. ``first``: the first frame's rings when already known (from
+    :func:`locate_lidar`)."""
+    seq = np.random.SeedSequence([settings.search.seed, 1])
+    out, model = [], None
+    for k, (f, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
+        r = (first if k == 0 and first is not None else
+             frame_rings(f, settings.features, np.random.default_rng(child), model))
+        if r.method == "lines" and r.n_rings >= MIN_RINGS and r.purity >= MIN_PURITY:
+            model = r
+        out.append(r)
+    return out
+
+
+def warn_rings(frames: list[Frame], rings: list[Rings]) -> None:
+    """One warning per ring problem (not per frame), naming a file and what to do.
+
+    Rings that do not fit the line model (purity below
+    :data:`~paretocal.features.rings.MIN_PURITY`) are still used, but a wrong ring structure
+    makes depth edges noise. Called once the scene is known to be usable, so that a bad-input
+    error is the only line the user sees.
+    """
+    notes = sorted({n for r in rings for n in r.notes})
+    for n in notes[:3]:
+        log.warning("%s", n)
+    bad = [(f, r) for f, r in zip(frames, rings) if r.purity < MIN_PURITY]
+    if bad:
+        f, r = bad[0]
+        hint = ("the cloud is not in the sensor's own frame: give the LiDAR's pose "
+                "(lidar_pose in calib.yaml)" if f.sensor_pose is None else
+                "check lidar_pose in calib.yaml")
+        log.warning("%s: laser rings do not fit a spinning LiDAR (%d rings, %.0f %% of the "
+                    "returns on their ring's cone; %d of %d frames like this); depth edges "
+                    "will be unreliable; %s", f.points_path, r.n_rings, 100 * r.purity,
+                    len(bad), len(frames), hint)
+
+
+def describe_inputs(frames: list[Frame], lidar_info: dict | None = None,
+                    rings: list[Rings] | None = None) -> dict:
+    """What the inputs offered (result.json ``inputs``): the point-cloud fields that gave
+    intensity, ring and time, the reader's notes, the camera model, the LiDAR pose and, when
+    given, where it came from (:func:`locate_lidar`) and each sweep's rings."""
+    pf = dict(frames[0].point_fields or {})
+    notes = sorted({w for f in frames for w in (f.point_fields or {}).get("warnings", ())})
+    pf.pop("warnings", None)
+    cam = frames[0].camera
+    out = {"point_fields": pf, "notes": notes,
+           "camera_model": getattr(cam, "model", "pinhole"),
+           "lidar_pose": None if frames[0].sensor_pose is None
+           else np.asarray(frames[0].sensor_pose).tolist(),
+           "mask": frames[0].mask is not None}
+    if lidar_info is not None:
+        out["lidar_pose_source"] = lidar_info
+    if rings is not None:
+        out["rings"] = [{"frame": f.name, "method": r.method, "n_rings": int(r.n_rings),
+                         "purity": round(float(r.purity), 4)} for f, r in zip(frames, rings)]
+    return out

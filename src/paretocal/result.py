@@ -1,0 +1,139 @@
+"""The result of a calibration run: the final front, the chosen solution and everything the
+run measured (:class:`CalibrationResult`), and its ``result.json`` document."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import __version__
+from .config import Settings
+from .geometry import pose_error
+from .objective import CalibrationObjective
+from .objective.cost import CostModel
+from .search import VARIABLES
+from .verdict import reliability
+
+
+@dataclass
+class Front:
+    """The final non-dominated set, sorted by cost.
+
+    Attributes
+    ----------
+    X : ndarray, shape (k, 7)
+        ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    F : ndarray, shape (k, 2)
+        ``[f1, f2]``.
+    T : ndarray, shape (k, 4, 4)
+        The extrinsics.
+    columns : dict of str -> ndarray (k,)
+        Per-solution figures: chamfer parts, ``ms``, ``bytes``, ``in_view`` and, when a
+        reference is known, the reference errors.
+    """
+
+    X: np.ndarray
+    F: np.ndarray
+    T: np.ndarray
+    columns: dict
+
+
+@dataclass
+class CalibrationResult:
+    """Everything a calibration run produced (see :func:`calibrate`)."""
+
+    T_cam_lidar: np.ndarray
+    T_init: np.ndarray
+    T_ref: np.ndarray | None
+    chosen: int
+    front: Front
+    decision: dict
+    cost_model: CostModel
+    settings: Settings
+    evaluations: int
+    wall_s: float
+    timings: dict
+    frames: list[str]
+    feature_counts: dict
+    n_range: tuple[int, int]
+    history: list = field(default_factory=list)
+    nsga_front: tuple | None = None
+    quality: dict | None = None
+    #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
+    reliability: dict | None = None
+    #: What was done about motion during the sweeps (see :func:`compensate_motion`).
+    motion: dict | None = None
+    #: What the input files offered: the point fields used, the camera model, notes.
+    inputs: dict | None = None
+    #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
+    #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
+    evidence: dict | None = None
+    #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
+    sweeps: list | None = None
+    #: The final objective (feature points chosen at the estimate) and the grid seeds of the
+    #: search, for studies that evaluate more candidates; not written to result.json.
+    objective: CalibrationObjective | None = None
+    seed_poses: np.ndarray | None = None
+
+    @property
+    def correction(self) -> dict[str, float]:
+        x = self.front.X[self.chosen]
+        return {k: float(v) for k, v in zip(VARIABLES[:6], x[:6])}
+
+    @property
+    def n_points(self) -> int:
+        return int(round(self.front.X[self.chosen, 6]))
+
+    @property
+    def reference_error(self) -> dict | None:
+        if self.T_ref is None:
+            return None
+        e = pose_error(self.T_cam_lidar, self.T_ref)
+        return {k: float(v) for k, v in e.items()}
+
+    @property
+    def initial_error(self) -> dict | None:
+        if self.T_ref is None:
+            return None
+        e = pose_error(self.T_init, self.T_ref)
+        return {k: float(v) for k, v in e.items()}
+
+    def objectives(self) -> dict[str, float]:
+        i, c = self.chosen, self.front.columns
+        out = {"chamfer": float(self.front.F[i, 0]), "cost": float(self.front.F[i, 1])}
+        for k in ("chamfer_holdout", "deviation_px", "t_norm", "m_norm", "ms", "bytes", "edge_px",
+                  "intensity_px", "smooth_px", "sampling_se", "in_view"):
+            if k in c:
+                out[k] = float(c[k][i])
+        return out
+
+    def to_dict(self) -> dict:
+        """The ``result.json`` document (docs/conventions.md section 3)."""
+        return {
+            "T_cam_lidar": self.T_cam_lidar.tolist(),
+            "T_init": self.T_init.tolist(),
+            "correction": self.correction,
+            "n_points": self.n_points,
+            "objectives": self.objectives(),
+            "decision": self.decision,
+            "reference_error": self.reference_error,
+            "initial_error": self.initial_error,
+            "evaluations": int(self.evaluations),
+            "wall_s": round(float(self.wall_s), 3),
+            "seed": int(self.settings.search.seed),
+            "version": __version__,
+            "config": self.settings.to_dict(),
+            "frames": self.frames,
+            "n_range": list(self.n_range),
+            "front_size": int(len(self.front.X)),
+            "features": self.feature_counts,
+            "cost_model": self.cost_model.to_dict(),
+            "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
+            "ucb_k": round(float(self.settings.ucb_k), 4),
+            "quality": self.quality,
+            "motion": self.motion,
+            "inputs": self.inputs,
+            "reliability": self.reliability if self.reliability is not None
+            else reliability(self),
+        }

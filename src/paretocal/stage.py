@@ -1,0 +1,193 @@
+"""The objective set up from the frames: features of every frame as seen from a pose, checks of
+the scene, the range of ``n``, the measured cost model, and :class:`Stage` holding them."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from .config import Settings
+from .errors import DegenerateSceneError, SettingsError
+from .features.lidar import GROUP_NAMES
+from .features.prepare import FrameFeatures, prepare_frame
+from .features.rings import Rings
+from .io.frame import Frame
+from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
+from .objective.cost import CostModel
+from .verdict import MIN_POINTS_PER_FRAME
+
+log = logging.getLogger(__name__)
+
+
+#: A frame with fewer Canny edge pixels is blank for the objective: a real photograph has
+#: thousands (a KITTI frame about 30 000); a flat or black image gives none, or a few dozen
+#: from noise and compression, which no LiDAR edge could be aligned with.
+MIN_EDGE_PIXELS = 100
+
+
+DEFAULT_N_MIN = 20
+
+
+def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings,
+                     progress=None, rings: list[Rings] | None = None) -> list[FrameFeatures]:
+    """Features of every frame, each with its own seeded stream (independent of frame count).
+
+    ``rings`` (from :func:`sweep_rings`) saves recovering each sweep's rings again.
+    """
+    seq = np.random.SeedSequence(settings.search.seed)
+    out = []
+    for k, (frame, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
+        out.append(prepare_frame(frame, T_init, settings.features, settings.objective,
+                                 np.random.default_rng(child),
+                                 rings=None if rings is None else rings[k]))
+        if progress is not None:
+            progress(k + 1, len(frames))
+    return out
+
+
+def _check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
+                 T_view: np.ndarray | None = None, z_min: float = 0.1) -> None:
+    """Refuse scenes that cannot constrain the extrinsic, saying which frames and why.
+
+    Raises :class:`DegenerateSceneError` when a frame's image has no edges, or when no frame
+    has :data:`MIN_POINTS_PER_FRAME` LiDAR feature points in view at ``T_view``; the message
+    then says whether the points lie behind the camera, outside the image or are simply too
+    few, and whether the inverse or a half-turned extrinsic would see them. Frames with too
+    few points among good ones are only reported (a warning): they add little, but no harm.
+    """
+    blank = [f"{f.name} ({len(f.image.edge_uv)} px)" for f in feats
+             if len(f.image.edge_uv) < MIN_EDGE_PIXELS]
+    if blank:
+        raise DegenerateSceneError(
+            f"no image edges in frame(s) {_names(blank)} (fewer than {MIN_EDGE_PIXELS} edge "
+            "pixels): the images are blank or the Canny thresholds (canny_low, canny_high) are "
+            "too high; leave these frames out with --frames")
+    few = [k for k, f in enumerate(feats) if len(f.xyz) < MIN_POINTS_PER_FRAME]
+    if not few:
+        return
+    listed = _names([f"{feats[k].name} ({len(feats[k].xyz)})" for k in few])
+    cause = ""
+    if frames is not None and T_view is not None:
+        cause = "; " + _view_diagnosis([frames[k] for k in few], T_view, z_min)
+    if len(few) == len(feats):
+        raise DegenerateSceneError(
+            f"too few LiDAR feature points in view at the initial extrinsic (fewer than "
+            f"{MIN_POINTS_PER_FRAME} per frame: {listed}){cause}")
+    log.warning("frame(s) %s: fewer than %d LiDAR feature points in view at the initial "
+                "extrinsic%s; they add little to the calibration", listed, MIN_POINTS_PER_FRAME,
+                cause)
+
+
+def _names(items: list[str], most: int = 5) -> str:
+    more = f" and {len(items) - most} more" if len(items) > most else ""
+    return ", ".join(items[:most]) + more
+
+
+def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float) -> str:
+    """Why few points are in view at ``T``: a short clause for an error message."""
+    from .camera import project
+    from .geometry import invert, rotation_zyx
+
+    def counts(T_try):
+        front = seen = 0
+        for f in frames:
+            _, z, visible = project(f.points, f.camera, T_try, z_min)
+            front += int((z > z_min).sum())
+            seen += int(visible.sum())
+        return front, seen
+
+    total = sum(len(f.points) for f in frames)
+    front, seen = counts(T)
+    if front < 0.01 * total:
+        why = (f"{front} of {total} LiDAR points lie in front of the camera: nearly every "
+               "point is behind it")
+    elif seen < 0.01 * total:
+        why = (f"{seen} of {total} LiDAR points project into the image ({front} are in front "
+               "of the camera): the extrinsic or the camera intrinsics (K, width, height) are "
+               "wrong")
+    else:
+        why = (f"{seen} of {total} LiDAR points project into the image but few are edges: "
+               "the sweep is too sparse there or the feature thresholds too strict")
+    # Two classic mistakes, cheap to test: the inverse transform and a half turn.
+    half = np.eye(4)
+    half[:3, :3] = rotation_zyx(0.0, 180.0, 0.0)        # 180 deg about the camera's y axis
+    hints = [("is it inverted (T_lidar_cam given for T_cam_lidar)?", invert(T)),
+             ("is it turned 180 deg about the vertical axis?", half @ T)]
+    best = max(((counts(T_try)[1], text) for text, T_try in hints), key=lambda c: c[0])
+    if best[0] > max(20 * seen, 1000):
+        why += f"; {best[0]} points would be in view with the initial extrinsic fixed: {best[1]}"
+    else:
+        why += "; check --init and the camera"
+    return why
+
+
+class Stage:
+    """The objective built from the frames' features as seen from ``T_view``.
+
+    Parameters: the frames, ``T_view`` (the pose the feature points are chosen at: those in
+    view, plus a margin), ``T_init`` (the objective's corrections are relative to it), the
+    settings, an optional ``progress(done, total)`` and the sweeps' rings (from
+    :func:`paretocal.inputs.sweep_rings`).
+
+    Attributes: ``feats`` (search part of each frame's features), ``scene``, ``holdout``
+    (held-out scene or None), ``n_min``, ``n_max``, ``cost`` (the measured cost model) and
+    ``objective`` (corrections relative to ``T_init``).
+    """
+
+    def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
+                 settings: Settings, progress=None, rings: list[Rings] | None = None):
+        feats_all = prepare_features(frames, T_view, settings, progress, rings)
+        _check_scene(feats_all, frames, T_view, settings.features.z_min)
+        o, z_min = settings.objective, settings.features.z_min
+        parts = [f.split(o.holdout) for f in feats_all]
+        self.feats = [p[0] for p in parts]
+        self.scene = build_scene(self.feats, z_min, o.outside)
+        self.holdout = (build_scene([p[1] for p in parts], z_min, o.outside)
+                        if o.holdout > 0 else None)
+        self.n_min, self.n_max = n_range(settings, self.scene.points_per_frame)
+        self.cost = measure_cost_model(self.scene, get_evaluator(o.evaluator), T_view,
+                                       self.n_min, self.n_max)
+        self.objective = CalibrationObjective(self.scene, T_init, o, self.cost,
+                                              [f.image.edge_uv for f in self.feats],
+                                              ucb_k=settings.ucb_k)
+
+
+def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]:
+    """The search's range of points per frame, validated against what the frames hold."""
+    most = int(points_per_frame.max())
+    s = settings.search
+    n_max = most if s.n_max is None else int(s.n_max)
+    n_min = min(DEFAULT_N_MIN, n_max) if s.n_min is None else int(s.n_min)
+    if n_max > most:
+        raise SettingsError(f"--n-max {n_max}: the frames hold at most {most} feature points "
+                            "per frame")
+    if n_min > n_max:
+        raise SettingsError(f"--n-min {n_min} is larger than the largest n ({n_max})")
+    return n_min, n_max
+
+
+def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:
+    """Each solution's pose scored on every held-out point (no sampling-error term), shape (k,)."""
+    dummy = CostModel(0.0, 1.0, 0.0, 1.0, 0, 1, {})
+    obj = CalibrationObjective(scene, T_init, settings.objective, dummy, ucb_k=0.0)
+    Xa = np.array(X, dtype=np.float64, copy=True)
+    Xa[:, 6] = int(scene.points_per_frame.max())
+    return obj.chamfer(Xa)["f1"]
+
+
+def feature_counts(feats: list[FrameFeatures]) -> dict:
+    per = [f.counts() for f in feats]
+    total = {g: int(sum(p[g] for p in per)) for g in GROUP_NAMES}
+    summaries = [f.rings for f in feats if f.rings]
+    ring_info = None
+    if summaries:
+        ring_info = {"methods": sorted({s["method"] for s in summaries}),
+                     "min_purity": min(s["purity"] for s in summaries),
+                     "spacing_deg_median": summaries[0]["spacing_deg_median"]}
+    return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
+            "total": total, "rings": sorted({f.n_rings for f in feats}),
+            "ring_recovery": ring_info,
+            # Frames with enough feature points in view to constrain anything.
+            "frames_contributing": int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME
+                                           for f in feats))}
