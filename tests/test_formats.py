@@ -23,7 +23,7 @@ from paretocal.io.exports import (INVERSE_FILE, KITTI_FILE, TF_FILE, kitti_rect_
                                   read_extrinsic_inverse, read_kitti_velo_to_cam, read_tf_static,
                                   write_exports)
 from paretocal.io.readers import read_kitti_calib, read_points
-from paretocal.io.results import write_run
+from paretocal.report.results import write_run
 
 # --- writers used by the tests (independent of the readers under test) ---------------------------
 

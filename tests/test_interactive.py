@@ -18,7 +18,7 @@ import pytest
 from paretocal import Settings, calibrate
 from paretocal.camera import Camera, project
 from paretocal.geometry import correction_matrix
-from paretocal.io.results import write_run
+from paretocal.report.results import write_run
 from paretocal.report.interactive import write_interactive
 
 CHROMIUM = os.environ.get("PARETOCAL_CHROMIUM", "/usr/bin/chromium")

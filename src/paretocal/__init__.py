@@ -31,7 +31,7 @@ from .config import Settings, load_settings  # noqa: E402
 from .depth import depth_map, write_depth  # noqa: E402
 from .errors import ParetocalError  # noqa: E402
 from .io import load_frames, read_extrinsic, write_extrinsic  # noqa: E402
-from .io.results import write_run  # noqa: E402
+from .report.results import write_run  # noqa: E402
 from .pipeline import CalibrationResult, calibrate  # noqa: E402
 from .study import StudyPlan, run_study  # noqa: E402
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from .errors import InputError, ParetocalError
 from .io.atomic import atomic_path, atomic_write_text
-from .io.results import json_default
+from .report.results import json_default
 
 RECORD = "entry.json"
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -179,7 +179,7 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .config import settings_from_mapping
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
-    from .io.results import write_run
+    from .report.results import write_run
     from .pipeline import calibrate
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),

@@ -227,7 +227,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     import json
 
     from .io.atomic import atomic_write_text
-    from .io.results import write_run
+    from .report.results import write_run
     from .pipeline import calibrate as run_calibration
     from .search.checkpoint import Checkpoint, SearchInterrupted
 
@@ -246,7 +246,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                                      checkpoint=ckpt)
             write_run(result, out, result.sweeps or loaded, figures=figures)
     except SearchInterrupted as exc:
-        from .io.results import partial_front_csv
+        from .report.results import partial_front_csv
 
         atomic_write_text(out / "partial_front.csv", partial_front_csv(exc.X, exc.F))
         where = (f"checkpoint kept in {exc.checkpoint}; continue with: paretocal calibrate "

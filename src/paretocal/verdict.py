@@ -35,7 +35,7 @@ from .quality import AXES, TO_REPORT, displacement_px, local_optimum
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .pipeline import CalibrationResult
+    from .result import CalibrationResult
 
 #: A frame with fewer LiDAR feature points in view adds nothing the verdict can count on.
 MIN_POINTS_PER_FRAME = 30

@@ -1,4 +1,4 @@
-"""Input layouts, file readers and result writers (the I/O edge of the pipeline)."""
+"""Input layouts, file readers and the extrinsic file formats (the input edge of the pipeline)."""
 
 from .extrinsic import read_extrinsic, write_extrinsic
 from .frame import Frame

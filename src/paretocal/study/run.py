@@ -34,7 +34,7 @@ from ..errors import InputError
 from ..geometry import pose_error
 from ..io.atomic import atomic_write_text
 from ..io.layouts import load_frames
-from ..io.results import json_default, write_run
+from ..report.results import json_default, write_run
 from ..search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends

@@ -1,6 +1,6 @@
 """Writing a calibration run: result.json, pareto.csv, extrinsic.yaml, exports and figures.
 
-The exports (:mod:`.exports`) are the chosen extrinsic as KITTI ``calib_velo_to_cam.txt``, ROS
+The exports (:mod:`paretocal.io.exports`) are the chosen extrinsic as KITTI ``calib_velo_to_cam.txt``, ROS
 ``tf_static.yaml`` and its inverse ``extrinsic_inverse.yaml``.
 
 Every file is written atomically (temporary file, then rename).
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.atomic import atomic_write_text
+from ..io.exports import kitti_rect_of, write_exports
+from ..io.extrinsic import write_extrinsic
+from ..io.frame import Frame
 from ..search.problem import VARIABLES
-from .atomic import atomic_write_text
-from .exports import kitti_rect_of, write_exports
-from .extrinsic import write_extrinsic
-from .frame import Frame
 
 FRONT_CSV_FIXED = list(VARIABLES) + ["chamfer", "cost", "t_norm", "m_norm", "ms", "bytes"]
 
@@ -85,7 +85,7 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
     written.append(out / "extrinsic.yaml")
     written += write_exports(out, result.T_cam_lidar, kitti_rect_of(frames), str(doc["version"]))
     if figures:
-        from ..report.figures import overlay_figure, pareto_figure
+        from .figures import overlay_figure, pareto_figure
 
         pareto_figure(result, out / "pareto.png")
         written.append(out / "pareto.png")
@@ -102,6 +102,6 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
                 overlay_figure(f, result.T_ref, out / "overlay_reference.png",
                                f"dataset reference extrinsic (frame {f.name})", z_min)
                 written.append(out / "overlay_reference.png")
-            from ..report.interactive import write_interactive
+            from .interactive import write_interactive
             written.append(write_interactive(result, frames, out / "interactive.html", overlay_frame))
     return written

@@ -1,0 +1,72 @@
+"""The package's layers only look down: inputs at the bottom, the numerical core above them, the
+pipeline's stages, then results, reports and the command line (README, Method)."""
+
+import ast
+from pathlib import Path
+
+import paretocal
+
+#: Rank of each top-level module or subpackage; a module may import only from ranks <= its own.
+RANKS = {
+    "errors": 0,
+    "geometry": 1, "camera": 1,
+    "io": 2,
+    "config": 3,
+    "features": 4, "motion": 4,
+    "objective": 5, "testing": 5,
+    "search": 6, "quality": 6, "decide": 6,
+    "inputs": 7, "stage": 7, "verdict": 7, "result": 7,
+    "pipeline": 8, "check": 8, "depth": 8,
+    "report": 9,
+    "study": 10, "batch": 10,
+    "cli": 11, "__init__": 11,
+}
+
+ROOT = Path(paretocal.__file__).parent
+
+
+def _unit(path: Path) -> str:
+    rel = path.relative_to(ROOT).parts
+    return rel[0] if len(rel) > 1 else rel[0][:-3]
+
+
+def _imports(path: Path) -> set[str]:
+    """The top-level paretocal units a module imports (at any depth in the file)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    pkg = path.relative_to(ROOT).parts[:-1]          # the module's package inside paretocal
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:                           # relative: resolve against the package
+                base = list(pkg[: len(pkg) - (node.level - 1)])
+                parts = base + (node.module.split(".") if node.module else [])
+                if not parts:                        # "from . import x": the names are units
+                    out.update(a.name for a in node.names)
+                else:
+                    out.add(parts[0])
+            elif node.module and node.module.split(".")[0] == "paretocal":
+                parts = node.module.split(".")
+                out.add(parts[1] if len(parts) > 1 else "__init__")
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                parts = a.name.split(".")
+                if parts[0] == "paretocal" and len(parts) > 1:
+                    out.add(parts[1])
+    return out
+
+
+def test_every_unit_has_a_rank():
+    units = {_unit(p) for p in ROOT.rglob("*.py")}
+    assert units <= set(RANKS), sorted(units - set(RANKS))
+
+
+def test_layers_only_look_down():
+    upward = []
+    for path in sorted(ROOT.rglob("*.py")):
+        me = _unit(path)
+        for target in _imports(path):
+            if target == "__version__":
+                continue
+            if target in RANKS and RANKS[target] > RANKS[me]:
+                upward.append(f"{path.relative_to(ROOT)} imports {target}")
+    assert not upward, "\n".join(upward)
