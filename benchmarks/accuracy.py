@@ -79,7 +79,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from paretocal.geometry import check_rigid, correction_matrix, invert, pose_error
+from paretocal.geometry import check_rigid, decalibrate, invert, pose_error
 from paretocal.io import detect_source, load_frames, write_extrinsic
 from paretocal.io.exports import kitti_velo_to_cam_text
 from paretocal.io.readers import read_mapping
@@ -351,9 +351,7 @@ def init_error_text(args) -> str:
 
 def trial_start(k: int, args, T_ref: np.ndarray) -> np.ndarray:
     """Trial ``k``'s start: the reference with the inverse of a seeded correction."""
-    rng = np.random.default_rng(1000 + k)
-    p = np.r_[rng.uniform(-args.trans, args.trans, 3), rng.uniform(-args.rot, args.rot, 3)]
-    return T_ref @ invert(correction_matrix(p))
+    return decalibrate(T_ref, args.rot, args.trans, 1000 + k)[0]
 
 
 def _run_api(args, ds: Dataset, view: Path, T_init: np.ndarray) -> dict:

@@ -21,7 +21,7 @@ import yaml
 
 from paretocal import Settings
 from paretocal.batch import run_batch
-from paretocal.geometry import correction_matrix, invert
+from paretocal.geometry import decalibrate
 from paretocal.io import detect_source, write_extrinsic
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",
@@ -33,10 +33,8 @@ def manifest(root: Path, n: int) -> Path:
     T_ref = detect_source(DATE).frames[0].T_ref
     entries = []
     for k in range(n):
-        rng = np.random.default_rng(2000 + k)
-        p = np.r_[rng.uniform(-0.1, 0.1, 3), rng.uniform(-3, 3, 3)]
         init = root / f"init_{k}.yaml"
-        write_extrinsic(init, T_ref @ invert(correction_matrix(p)))
+        write_extrinsic(init, decalibrate(T_ref, 3.0, 0.1, 2000 + k)[0])
         a = 5 * (k % 4)
         entries.append({"id": f"e{k:02d}", "source": str(DATE), "frames": f"{a}:{a + 5}",
                         "init": str(init), "vehicle": f"car{k // 4}", "order": k % 4})

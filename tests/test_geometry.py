@@ -76,3 +76,14 @@ class TestCheckRigid:
     def test_rejects(self, bad, what):
         with pytest.raises(InputError, match=what):
             check_rigid(bad, "init.yaml")
+
+
+def test_decalibrate_returns_the_correction_back():
+    from paretocal.geometry import correction_matrix, decalibrate
+
+    T_ref = correction_matrix(np.array([0.3, -0.1, 0.2, 10.0, -5.0, 2.0]))
+    T0, p = decalibrate(T_ref, 4.0, 0.15, 7)
+    np.testing.assert_allclose(T0 @ correction_matrix(p), T_ref, atol=1e-12)
+    assert np.all(np.abs(p[:3]) <= 0.15) and np.all(np.abs(p[3:]) <= 4.0)
+    T1, q = decalibrate(T_ref, 4.0, 0.15, 7)                  # the same seed, the same start
+    np.testing.assert_array_equal(T0, T1)

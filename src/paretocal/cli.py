@@ -325,7 +325,7 @@ def perturb(
     extrinsic that this correction brings back to the dataset's (T_init = T_ref @ D^-1), so the
     correction to find lies in the box.
     """
-    from .geometry import correction_matrix, invert, pose_error
+    from .geometry import decalibrate, pose_error
     from .io import detect_source, write_extrinsic
 
     if rot < 0 or trans < 0:
@@ -334,9 +334,7 @@ def perturb(
     T_ref = src.frames[0].T_ref
     if T_ref is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic to perturb")
-    rng = np.random.default_rng(seed)
-    p = np.concatenate([rng.uniform(-trans, trans, 3), rng.uniform(-rot, rot, 3)])
-    T = T_ref @ invert(correction_matrix(p))
+    T, p = decalibrate(T_ref, rot, trans, seed)
     e = pose_error(T, T_ref)
     write_extrinsic(out, T, comment=(
         f"{source} extrinsic decalibrated (seed {seed}); the correction back is x y z = "

@@ -180,3 +180,22 @@ def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
     U, _, Vt = np.linalg.svd(R)
     T[:3, :3] = U @ Vt
     return T
+
+
+def decalibrate(T_ref: np.ndarray, rot_deg: float, trans_m: float,
+                rng: np.random.Generator | int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A decalibrated extrinsic and the correction that brings it back to ``T_ref``.
+
+    The correction ``p = (x, y, z, yaw, pitch, roll)`` is drawn uniform per axis in
+    ``+-trans_m`` (m) and ``+-rot_deg`` (deg), translations first; the start is
+    ``T_init = T_ref @ D(p)^-1``, so the correction a calibration has to find, ``p``, lies in
+    the box (the convention of ``paretocal perturb`` and the benchmarks).
+
+    Returns
+    -------
+    T_init : ndarray, shape (4, 4)
+    p : ndarray, shape (6,)
+    """
+    rng = np.random.default_rng(rng)
+    p = np.concatenate([rng.uniform(-trans_m, trans_m, 3), rng.uniform(-rot_deg, rot_deg, 3)])
+    return np.asarray(T_ref, dtype=np.float64) @ invert(correction_matrix(p)), p
