@@ -430,21 +430,13 @@ def test_config_files(work, text):
     s.validate()                                     # what loads is valid
 
 
-#: The allowed values of the string settings.
-CHOICES = {"ring_method": ["auto", "field", "scan", "lines", "elevation"],
-           "edge_weight": ["none", "sqrt_jump"], "chamfer": ["edge-dt", "paper"],
-           "outside": ["mean", "truncation"], "cost": ["model", "psutil"],
-           "evaluator": ["auto", "numba", "numpy"], "engine": ["lean", "pymoo"],
-           "rule": ["knee", "knee-chamfer", "budget", "min-chamfer"], "deskew": ["auto", "off"]}
-
-
 @st.composite
 def settings_docs(draw):
     """Settings laid out by section with values near the defaults, None where a field allows
     it (most of them valid; the invalid ones are rejected by the test)."""
     import dataclasses as dc
 
-    from paretocal.config import _field_types
+    from paretocal.config import CHOICES, _field_types
 
     base = Settings()
     doc = {}
@@ -470,7 +462,7 @@ def settings_docs(draw):
                 ref = value if value not in (None, 0.0) else 1.0
                 section[name] = float(ref) * draw(st.floats(0.25, 2.0))
             elif kind == "str":
-                section[name] = draw(st.sampled_from(CHOICES.get(name, [value])))
+                section[name] = draw(st.sampled_from(CHOICES.get((f.name, name), (value,))))
             elif kind.startswith("tuple"):
                 section[name] = [draw(st.integers(1, 16)), draw(st.integers(1, 16))]
         doc[f.name] = section

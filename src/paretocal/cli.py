@@ -23,27 +23,17 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 log = logging.getLogger("paretocal")
 
 
-class Rule(str, Enum):
-    knee = "knee"
-    knee_chamfer = "knee-chamfer"
-    budget = "budget"
-    min_chamfer = "min-chamfer"
+def _choices(section: str, name: str, cls: str) -> type[Enum]:
+    """The command line's choices of a setting, from the one list in the configuration."""
+    from .config import CHOICES
+
+    return Enum(cls, [(v.replace("-", "_"), v) for v in CHOICES[(section, name)]], type=str)
 
 
-class Chamfer(str, Enum):
-    edge_dt = "edge-dt"
-    paper = "paper"
-
-
-class Cost(str, Enum):
-    model = "model"
-    psutil = "psutil"
-
-
-class Evaluator(str, Enum):
-    auto = "auto"
-    numba = "numba"
-    numpy = "numpy"
+Rule = _choices("decision", "rule", "Rule")
+Chamfer = _choices("objective", "chamfer", "Chamfer")
+Cost = _choices("objective", "cost", "Cost")
+Evaluator = _choices("objective", "evaluator", "Evaluator")
 
 
 def _setup_logging(verbose: bool, quiet: bool) -> None:

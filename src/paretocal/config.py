@@ -200,10 +200,13 @@ class Settings:
                 v = getattr(section, fl.name)
                 if isinstance(v, float) and not math.isfinite(v):
                     raise SettingsError(f"{_option(fl.name)} {v}: must be a finite number")
+        for (section, name), allowed in CHOICES.items():
+            value = getattr(getattr(self, section), name)
+            if value not in allowed:
+                raise SettingsError(f"{_option(name)} {value!r}: choose "
+                                    f"{', '.join(allowed[:-1])} or {allowed[-1]}")
         if s.pop < 4:
             raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
-        if s.engine not in ("lean", "pymoo"):
-            raise SettingsError(f"engine {s.engine!r}: choose 'lean' or 'pymoo'")
         if s.gens < 1:
             raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
         if s.seed < 0:
@@ -238,30 +241,17 @@ class Settings:
             raise SettingsError("seed_points must be at least 1 and seed_count not negative")
         if not 0.0 <= o.w_edge <= 1.0:
             raise SettingsError(f"--w-edge {o.w_edge}: must lie in [0, 1] (w2 = 1 - w1)")
-        if o.chamfer not in ("edge-dt", "paper"):
-            raise SettingsError(f"--chamfer {o.chamfer!r}: choose 'edge-dt' or 'paper'")
-        if o.outside not in ("mean", "truncation"):
-            raise SettingsError(f"outside {o.outside!r}: choose 'mean' or 'truncation'")
-        if o.cost not in ("model", "psutil"):
-            raise SettingsError(f"--cost {o.cost!r}: choose 'model' or 'psutil'")
-        if o.evaluator not in ("auto", "numba", "numpy"):
-            raise SettingsError(f"--evaluator {o.evaluator!r}: choose 'auto', 'numba' or 'numpy'")
         if not 0.0 <= o.holdout < 0.9:
             raise SettingsError(f"holdout {o.holdout}: must lie in [0, 0.9)")
         if not o.truncation_px > 0:
             raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
         if (o.ucb_k is not None and o.ucb_k < 0) or o.contrast < 0:
             raise SettingsError("ucb_k and contrast must not be negative")
-        if d.rule not in ("knee", "knee-chamfer", "budget", "min-chamfer"):
-            raise SettingsError(f"--rule {d.rule!r}: choose knee, knee-chamfer, budget or "
-                                "min-chamfer")
         if not d.max_deviation_px > 0:
             raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
         if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
             raise SettingsError("--budget-ms must be a positive number of milliseconds")
         m = self.motion
-        if m.deskew not in ("auto", "off"):
-            raise SettingsError(f"motion.deskew {m.deskew!r}: choose auto or off")
         if not abs(m.time_offset_s) <= 1.0:
             raise SettingsError(f"--time-offset {m.time_offset_s}: at most 1 s either way")
         if m.points < 1000:
@@ -272,12 +262,6 @@ class Settings:
             raise SettingsError(f"decision.restart_share {d.restart_share}: must lie in (0, 1]")
         if d.refine_iters < 0:
             raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
-        if f.ring_method not in ("auto", "field", "scan", "lines", "elevation"):
-            raise SettingsError(f"ring_method {f.ring_method!r}: choose auto, field, scan, lines "
-                                "or elevation")
-        if f.edge_weight not in ("none", "sqrt_jump", "depth_balanced"):
-            raise SettingsError(f"edge_weight {f.edge_weight!r}: choose none, sqrt_jump or "
-                                "depth_balanced")
         if f.canny_low < 0 or f.canny_low > f.canny_high:
             raise SettingsError("canny_low must not be negative nor exceed canny_high")
         if len(f.grid) != 2 or min(f.grid) < 1:
@@ -295,10 +279,26 @@ class Settings:
         return self
 
 
+#: The allowed values of every setting that takes a word, by (section, name): the one list the
+#: validation, the command line's choices and the documentation read.
+CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
+    ("search", "engine"): ("lean", "pymoo"),
+    ("objective", "chamfer"): ("edge-dt", "paper"),
+    ("objective", "outside"): ("mean", "truncation"),
+    ("objective", "cost"): ("model", "psutil"),
+    ("objective", "evaluator"): ("auto", "numba", "numpy"),
+    ("decision", "rule"): ("knee", "knee-chamfer", "budget", "min-chamfer"),
+    ("motion", "deskew"): ("auto", "off"),
+    ("features", "ring_method"): ("auto", "field", "scan", "lines", "elevation"),
+    ("features", "edge_weight"): ("none", "sqrt_jump", "depth_balanced"),
+}
+
 _OPTIONS = {"pop": "--pop", "gens": "--gens", "seed": "--seed", "n_min": "--n-min",
             "n_max": "--n-max", "bound_t_m": "--bound-t", "bound_r_deg": "--bound-r",
             "w_edge": "--w-edge", "budget_ms": "--budget-ms",
-            "max_deviation_px": "--max-deviation", "truncation_px": "--truncation"}
+            "max_deviation_px": "--max-deviation", "truncation_px": "--truncation",
+            "rule": "--rule", "chamfer": "--chamfer", "cost": "--cost",
+            "evaluator": "--evaluator", "deskew": "motion.deskew"}
 
 
 def _option(name: str) -> str:
