@@ -4,6 +4,7 @@ stops the CLI cleanly with the checkpoint and the partial front; files stay whol
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import signal
@@ -16,7 +17,7 @@ import pytest
 
 from paretocal import Settings, calibrate
 from paretocal.cli import main
-from paretocal.errors import InputError
+from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import correction_matrix
 from paretocal.search.checkpoint import Checkpoint, SearchInterrupted
 
@@ -52,6 +53,31 @@ def test_resume_gives_the_uninterrupted_result(tmp_path, start):
     np.testing.assert_array_equal(resumed.T_cam_lidar, whole.T_cam_lidar)
     assert resumed.evaluations == whole.evaluations
     assert [h["best_f1"] for h in resumed.history] == [h["best_f1"] for h in whole.history]
+
+
+def test_a_run_folder_resumes_from_python(tmp_path, raw_date, start):
+    """The library's run folders: interrupted, the partial front and the checkpoint are on
+    disk; resume_run continues to the uninterrupted result and writes the run's files."""
+    from paretocal import calibrate_run, resume_run
+    from paretocal.rundir import CHECKPOINT, PARTIAL_FRONT, run_arguments
+
+    _, T = start
+    s = dataclasses.replace(SMALL, frames="0:2")
+    whole = calibrate_run(raw_date, tmp_path / "whole", T, s, figures=False)
+    run = tmp_path / "run"
+    with pytest.raises(SearchInterrupted):
+        calibrate_run(raw_date, run, T, s, figures=False, checkpoint_every=2,
+                      progress=_stop_at(5))
+    assert (run / CHECKPOINT).exists() and (run / PARTIAL_FRONT).exists()
+    args = run_arguments(run)
+    assert args["settings"] == s and args["figures"] is False
+    np.testing.assert_array_equal(args["T_init"], T)
+    resumed = resume_run(run)
+    np.testing.assert_array_equal(resumed.T_cam_lidar, whole.T_cam_lidar)
+    assert resumed.evaluations == whole.evaluations
+    assert (run / "result.json").exists() and not (run / CHECKPOINT).exists()
+    with pytest.raises(ParetocalError, match="not a run directory"):
+        run_arguments(tmp_path)
 
 
 def test_checkpoint_of_another_run_is_refused(tmp_path, start):

@@ -33,8 +33,9 @@ from .errors import ParetocalError  # noqa: E402
 from .io import load_frames, read_extrinsic, write_extrinsic  # noqa: E402
 from .report.results import write_run  # noqa: E402
 from .pipeline import CalibrationResult, calibrate  # noqa: E402
+from .rundir import calibrate_run, resume_run  # noqa: E402
 from .study import StudyPlan, run_study  # noqa: E402
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
-           "calibrate", "check_extrinsic", "depth_map", "load_frames", "load_settings",
-           "read_extrinsic", "run_study", "write_depth", "write_extrinsic", "write_run"]
+           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "load_frames", "load_settings",
+           "read_extrinsic", "resume_run", "run_study", "write_depth", "write_extrinsic", "write_run"]

@@ -12,7 +12,6 @@ from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
-import numpy as np
 import typer
 
 from .errors import ParetocalError, SettingsError
@@ -207,48 +206,30 @@ def calibrate(
                      strict)
 
 
-RUN_ARGS = "run_args.json"       # what --resume needs to rebuild the run
-CHECKPOINT = "checkpoint.pkl"
-
-
 def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,
-                     checkpoint_every: int, strict: bool = False) -> None:
-    """Calibrate with checkpoints in ``out``; on an interrupt write the partial front."""
-    import json
+                     checkpoint_every: int, strict: bool = False, resume: bool = False) -> None:
+    """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
+    where the partial front and the checkpoint are, and exit 130."""
+    from .rundir import PARTIAL_FRONT, calibrate_run, resume_run
+    from .search.checkpoint import SearchInterrupted
 
-    from .io.atomic import atomic_write_text
-    from .report.results import write_run
-    from .pipeline import calibrate as run_calibration
-    from .search.checkpoint import Checkpoint, SearchInterrupted
-
-    ckpt = None
-    if checkpoint_every > 0:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / RUN_ARGS, json.dumps({
-            "source": str(Path(source).resolve()),
-            "T_init": None if T_init is None else np.asarray(T_init).tolist(),
-            "settings": settings.to_dict(), "figures": figures}, indent=1) + "\n")
-        ckpt = Checkpoint(out / CHECKPOINT, every=checkpoint_every)
     interactive = sys.stderr.isatty() and not quiet
     try:
         with _Progress(interactive) as progress:
-            result = run_calibration(loaded, T_init, settings, progress=progress,
-                                     checkpoint=ckpt)
-            write_run(result, out, result.sweeps or loaded, figures=figures)
+            if resume:
+                result = resume_run(out, checkpoint_every, progress=progress)
+            else:
+                result = calibrate_run(source, out, T_init, settings, frames=loaded,
+                                       figures=figures, checkpoint_every=checkpoint_every,
+                                       progress=progress)
     except SearchInterrupted as exc:
-        from .report.results import partial_front_csv
-
-        atomic_write_text(out / "partial_front.csv", partial_front_csv(exc.X, exc.F))
         where = (f"checkpoint kept in {exc.checkpoint}; continue with: paretocal calibrate "
                  f"--resume {out}" if exc.checkpoint else "no checkpoint (--checkpoint-every 0)")
         print(f"paretocal: interrupted after generation {exc.generation}; wrote "
-              f"{out / 'partial_front.csv'}; {where}", file=sys.stderr)
+              f"{out / PARTIAL_FRONT}; {where}", file=sys.stderr)
         raise typer.Exit(130) from None
-    if ckpt is not None:
-        # A finished run needs no checkpoint; its arguments stay as a record.
-        Path(ckpt.path).unlink(missing_ok=True)
     ref = result.reference_error
-    typer.echo(f"paretocal: {len(loaded)} frames, {result.evaluations} evaluations in "
+    typer.echo(f"paretocal: {len(result.frames)} frames, {result.evaluations} evaluations in "
                f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision['rule']}), "
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval; error vs reference: {_fmt_err(ref)}; "
@@ -277,27 +258,11 @@ def verdict_line(reliability: dict) -> str:
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
-    import json
+    from .rundir import run_arguments
 
-    from .config import settings_from_mapping
-    from .io import load_frames
-
-    args_path = run_dir / RUN_ARGS
-    if not args_path.is_file():
-        raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
-                             "calibrate (or it was run with --checkpoint-every 0)")
-    try:
-        args = json.loads(args_path.read_text())
-        settings = settings_from_mapping(args["settings"], str(args_path))
-        T_init = None if args["T_init"] is None else np.asarray(args["T_init"], dtype=float)
-        source, figures = Path(args["source"]), bool(args["figures"])
-    except (ValueError, KeyError, TypeError) as exc:
-        raise ParetocalError(f"{args_path}: malformed ({type(exc).__name__}: {exc})") from None
-    if not (run_dir / CHECKPOINT).exists():
-        log.warning("%s: no checkpoint; the run starts over", run_dir)
-    loaded = load_frames(source, settings.frames, settings.camera)
-    _run_calibration(loaded, source, T_init, settings, run_dir, figures, quiet,
-                     max(checkpoint_every, 1), strict)
+    args = run_arguments(run_dir)              # a one-line error before anything is loaded
+    _run_calibration(None, args["source"], args["T_init"], args["settings"], run_dir,
+                     args["figures"], quiet, max(checkpoint_every, 1), strict, resume=True)
 
 
 @app.command()
