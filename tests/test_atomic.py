@@ -50,7 +50,7 @@ def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_
 
     from paretocal import Settings, calibrate
     from paretocal.geometry import correction_matrix
-    from paretocal.io import results
+    from paretocal.report import results
 
     T = raw_frames[0].T_ref @ correction_matrix(np.array([0.02, 0, 0, 0.5, 0, 0]))
     r = calibrate(raw_frames[:1], T, Settings().replace(search={"pop": 12, "gens": 2},
