@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import correction_matrix
-from .search.polish import DEFAULT_FD_STEP, _fd_stencil
+from .search.polish import DEFAULT_FD_STEP, _fd_stencil, newton_step, stencil_derivatives
 
 AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
@@ -28,29 +28,14 @@ TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for displ
 
 
 def _derivatives(values: np.ndarray, h: np.ndarray):
-    """Gradient (6,) and Hessian (6, 6) from the 28 stencil values of :func:`_fd_stencil`."""
-    f0, fp, fm, fpp = values[0], values[1:7], values[7:13], values[13:]
-    g = (fp - fm) / (2 * h)
-    H = np.zeros((6, 6))
-    k = 0
-    for i in range(6):
-        H[i, i] = (fp[i] - 2 * f0 + fm[i]) / h[i] ** 2
-        for j in range(i + 1, 6):
-            H[i, j] = H[j, i] = (fpp[k] - fp[i] - fp[j] + f0) / (h[i] * h[j])
-            k += 1
-    return g, H
+    """Gradient (6,) and Hessian (6, 6) from the 28 stencil values of one candidate."""
+    _, g, H = stencil_derivatives(values[None], h)
+    return g[0], H[0]
 
 
 def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float = 10.0):
-    """Step to the minimum of the local quadratic, in units of h with |eigenvalues| floored."""
-    Hs = H * h[:, None] * h[None, :]
-    w, V = np.linalg.eigh(Hs)
-    w = np.maximum(np.abs(w), np.abs(w).max() * 1e-3 + 1e-12)
-    step = -(V @ ((V.T @ (g * h)) / w))
-    norm = np.linalg.norm(step)
-    if norm > max_units:
-        step *= max_units / norm
-    return step * h
+    """Step (6,) in m and deg to the minimum of the local quadratic (|eigenvalues| floored)."""
+    return newton_step(g[None], H[None], h, max_units)[0]
 
 
 def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> dict:

@@ -101,6 +101,24 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
     cand = np.repeat(X[:, None, :], len(S), axis=1)
     cand[:, :, :6] += S[None]
     v = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(k, len(S))
+    return stencil_derivatives(v, h)
+
+
+def stencil_derivatives(v: np.ndarray, h: np.ndarray):
+    """Value, gradient and Hessian from objective values on :func:`_fd_stencil`.
+
+    Parameters
+    ----------
+    v : ndarray, shape (k, 28)
+        Values at the stencil's offsets, in its order.
+    h : ndarray, shape (6,)
+
+    Returns
+    -------
+    f0 : ndarray, shape (k,); g : ndarray, shape (k, 6); H : ndarray, shape (k, 6, 6)
+    """
+    v = np.atleast_2d(v)
+    k = len(v)
     f0, fp, fm, fpp = v[:, 0], v[:, 1:7], v[:, 7:13], v[:, 13:]
     g = (fp - fm) / (2 * h)
     H = np.zeros((k, 6, 6))
@@ -111,6 +129,26 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
             H[:, i, j] = H[:, j, i] = (fpp[:, idx] - fp[:, i] - fp[:, j] + f0) / (h[i] * h[j])
             idx += 1
     return f0, g, H
+
+
+def newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_step: float,
+                eig_floor: float = 1e-3) -> np.ndarray:
+    """Steps to the minima of the local quadratics, batched, shape (k, 6) in m and deg.
+
+    Worked in units of ``h`` (metres and degrees comparable); the Hessian's eigenvalues are
+    taken in absolute value and floored at ``eig_floor`` times the largest (so the step always
+    descends, and the noise-level flattest curvatures do not send it far); the step is capped
+    at ``max_step`` units of ``h``.
+    """
+    gs = np.atleast_2d(g) * h
+    Hs = np.atleast_3d(H) * h[None, :, None] * h[None, None, :]
+    w, V = np.linalg.eigh(Hs)
+    floor = np.maximum(np.abs(w).max(axis=1, keepdims=True) * eig_floor, 1e-12)
+    w = np.maximum(np.abs(w), floor)
+    step = -np.einsum("kij,kj->ki", V, np.einsum("kji,kj->ki", V, gs) / w)
+    norm = np.linalg.norm(step, axis=1, keepdims=True)
+    step *= np.minimum(1.0, max_step / np.maximum(norm, 1e-12))
+    return step * h
 
 
 def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters: int = 8,
@@ -145,17 +183,9 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
         f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
         evals += 28 * len(idx)
         f[idx] = np.minimum(f[idx], f0)
-        # Work in units of h so that metres and degrees are comparable.
-        gs = g * h
-        Hs = H * h[None, :, None] * h[None, None, :]
-        w, V = np.linalg.eigh(Hs)
-        floor = np.maximum(np.abs(w).max(axis=1, keepdims=True) * eig_floor, 1e-12)
-        w = np.maximum(np.abs(w), floor)
-        step = -np.einsum("kij,kj->ki", V, np.einsum("kji,kj->ki", V, gs) / w)
-        norm = np.linalg.norm(step, axis=1, keepdims=True)
-        step *= np.minimum(1.0, max_step / np.maximum(norm, 1e-12))
+        step = newton_step(g, H, h, max_step, eig_floor)
         cand = np.repeat(X[idx, None, :], len(alphas), axis=1)
-        cand[:, :, :6] += alphas[None, :, None] * (step * h)[:, None, :]
+        cand[:, :, :6] += alphas[None, :, None] * step[:, None, :]
         if lower is not None:
             cand[:, :, :6] = np.clip(cand[:, :, :6], lower[:6], upper[:6])
         fc = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(len(idx), -1)
