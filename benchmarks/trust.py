@@ -71,15 +71,20 @@ class Case:
     init_error: tuple | None = None  #: (deg, m) stated to the tool; None: the default
 
 
-def _kitti(spec=None):
+def _source(path, spec=None):
+    """Frames of ``path`` (loaded once) with their own reference extrinsic."""
     cache = {}
 
     def get(work, k):
         if "frames" not in cache:
-            cache["frames"] = load_frames(DATE, spec)
+            cache["frames"] = load_frames(path, spec)
         fr = cache["frames"]
         return list(fr), fr[0].T_ref
     return get
+
+
+def _kitti(spec=None):
+    return _source(DATE, spec)
 
 
 def _modified(change, spec=None):
@@ -131,17 +136,6 @@ def _variant(name):
             _VARIANTS[name] = (load_frames(folder), T_ref)
         fr, T = _VARIANTS[name]
         return list(fr), T
-    return get
-
-
-def _source(path, spec=None):
-    cache = {}
-
-    def get(work, k):
-        if "frames" not in cache:
-            cache["frames"] = load_frames(path, spec)
-        fr = cache["frames"]
-        return list(fr), fr[0].T_ref
     return get
 
 
