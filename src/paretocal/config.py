@@ -194,8 +194,7 @@ class Settings:
 
     def validate(self) -> "Settings":
         """Raise :class:`SettingsError` naming the option when a value is out of range."""
-        s, o, f, d = self.search, self.objective, self.features, self.decision
-        for section in (s, o, f, d, self.motion):
+        for section in (self.search, self.objective, self.features, self.decision, self.motion):
             for fl in fields(section):
                 v = getattr(section, fl.name)
                 if isinstance(v, float) and not math.isfinite(v):
@@ -205,78 +204,97 @@ class Settings:
             if value not in allowed:
                 raise SettingsError(f"{_option(name)} {value!r}: choose "
                                     f"{', '.join(allowed[:-1])} or {allowed[-1]}")
-        if s.pop < 4:
-            raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
-        if s.gens < 1:
-            raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
-        if s.seed < 0:
-            raise SettingsError(f"--seed {s.seed}: must be 0 or more")
-        if s.bound_t_m is not None and not s.bound_t_m > 0:
-            raise SettingsError(f"--bound-t {s.bound_t_m:g}: the translation bound must be "
-                                "positive (metres, +- around the initial extrinsic)")
-        if s.bound_r_deg is not None and not s.bound_r_deg > 0:
-            raise SettingsError(f"--bound-r {s.bound_r_deg:g}: the rotation bound must be "
-                                "positive (degrees, +- around the initial extrinsic)")
-        if s.bound_r_deg is not None and s.bound_r_deg > 90:
-            raise SettingsError(f"--bound-r {s.bound_r_deg:g}: at most 90 degrees")
-        if not (s.init_error_deg > 0 and s.init_error_m > 0):
-            raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: both the "
-                                "rotation (deg) and the translation (m) must be positive")
-        if s.init_error_deg > 60:
-            raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: at most "
-                                "60 degrees (a start further off is not an initial guess)")
-        if s.n_min is not None and s.n_max is not None and s.n_min > s.n_max:
-            raise SettingsError(f"--n-min {s.n_min} is larger than --n-max {s.n_max}")
-        if s.n_min is not None and s.n_min < 1:
-            raise SettingsError(f"--n-min {s.n_min}: must be at least 1")
-        if s.n_max is not None and s.n_max < 1:
-            raise SettingsError(f"--n-max {s.n_max}: must be at least 1")
-        if not 0.0 <= s.sbx_prob <= 1.0:
-            raise SettingsError(f"sbx_prob {s.sbx_prob}: must lie in [0, 1]")
-        if s.seed_grid_deg is not None and not s.seed_grid_deg > 0:
-            raise SettingsError(f"seed_grid_deg {s.seed_grid_deg}: must be positive (or null)")
-        if s.seed_grid_t_m is not None and not s.seed_grid_t_m > 0:
-            raise SettingsError(f"seed_grid_t_m {s.seed_grid_t_m}: must be positive (or null)")
-        if s.seed_points < 1 or s.seed_count < 0:
-            raise SettingsError("seed_points must be at least 1 and seed_count not negative")
-        if not 0.0 <= o.w_edge <= 1.0:
-            raise SettingsError(f"--w-edge {o.w_edge}: must lie in [0, 1] (w2 = 1 - w1)")
-        if not 0.0 <= o.holdout < 0.9:
-            raise SettingsError(f"holdout {o.holdout}: must lie in [0, 0.9)")
-        if not o.truncation_px > 0:
-            raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
-        if (o.ucb_k is not None and o.ucb_k < 0) or o.contrast < 0:
-            raise SettingsError("ucb_k and contrast must not be negative")
-        if not d.max_deviation_px > 0:
-            raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
-        if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
-            raise SettingsError("--budget-ms must be a positive number of milliseconds")
-        m = self.motion
-        if not abs(m.time_offset_s) <= 1.0:
-            raise SettingsError(f"--time-offset {m.time_offset_s}: at most 1 s either way")
-        if m.points < 1000:
-            raise SettingsError(f"motion.points {m.points}: at least 1000")
-        if d.restarts < 0 or d.restarts > 10:
-            raise SettingsError(f"decision.restarts {d.restarts}: between 0 and 10")
-        if not 0.0 < d.restart_share <= 1.0:
-            raise SettingsError(f"decision.restart_share {d.restart_share}: must lie in (0, 1]")
-        if d.refine_iters < 0:
-            raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
-        if f.canny_low < 0 or f.canny_low > f.canny_high:
-            raise SettingsError("canny_low must not be negative nor exceed canny_high")
-        if len(f.grid) != 2 or min(f.grid) < 1:
-            raise SettingsError(f"grid {list(f.grid)}: two whole numbers of cells, at least 1")
-        if not 0 <= f.min_range_m < f.max_range_m:
-            raise SettingsError(f"min_range_m {f.min_range_m} and max_range_m {f.max_range_m}: "
-                                "need 0 <= min_range_m < max_range_m")
-        if not f.z_min > 0:
-            raise SettingsError(f"z_min {f.z_min}: must be positive (metres in front of the camera)")
-        negative = [k for k in ("blur_sigma", "min_edge_px", "depth_jump_m", "cross_jump_m",
-                                "cross_jump_rel", "intensity_jump", "smooth_ratio",
-                                "view_margin_px") if (getattr(f, k) or 0) < 0]
-        if negative:
-            raise SettingsError(f"features: {', '.join(negative)} must not be negative")
+        _check_search(self.search)
+        _check_objective(self.objective)
+        _check_decision(self.decision)
+        _check_motion(self.motion)
+        _check_features(self.features)
         return self
+
+
+def _check_search(s: SearchSettings) -> None:
+    if s.pop < 4:
+        raise SettingsError(f"--pop {s.pop}: the population needs at least 4 individuals")
+    if s.gens < 1:
+        raise SettingsError(f"--gens {s.gens}: needs at least 1 generation")
+    if s.seed < 0:
+        raise SettingsError(f"--seed {s.seed}: must be 0 or more")
+    if s.bound_t_m is not None and not s.bound_t_m > 0:
+        raise SettingsError(f"--bound-t {s.bound_t_m:g}: the translation bound must be "
+                            "positive (metres, +- around the initial extrinsic)")
+    if s.bound_r_deg is not None and not s.bound_r_deg > 0:
+        raise SettingsError(f"--bound-r {s.bound_r_deg:g}: the rotation bound must be "
+                            "positive (degrees, +- around the initial extrinsic)")
+    if s.bound_r_deg is not None and s.bound_r_deg > 90:
+        raise SettingsError(f"--bound-r {s.bound_r_deg:g}: at most 90 degrees")
+    if not (s.init_error_deg > 0 and s.init_error_m > 0):
+        raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: both the "
+                            "rotation (deg) and the translation (m) must be positive")
+    if s.init_error_deg > 60:
+        raise SettingsError(f"--init-error {s.init_error_deg:g},{s.init_error_m:g}: at most "
+                            "60 degrees (a start further off is not an initial guess)")
+    if s.n_min is not None and s.n_max is not None and s.n_min > s.n_max:
+        raise SettingsError(f"--n-min {s.n_min} is larger than --n-max {s.n_max}")
+    if s.n_min is not None and s.n_min < 1:
+        raise SettingsError(f"--n-min {s.n_min}: must be at least 1")
+    if s.n_max is not None and s.n_max < 1:
+        raise SettingsError(f"--n-max {s.n_max}: must be at least 1")
+    if not 0.0 <= s.sbx_prob <= 1.0:
+        raise SettingsError(f"sbx_prob {s.sbx_prob}: must lie in [0, 1]")
+    if s.seed_grid_deg is not None and not s.seed_grid_deg > 0:
+        raise SettingsError(f"seed_grid_deg {s.seed_grid_deg}: must be positive (or null)")
+    if s.seed_grid_t_m is not None and not s.seed_grid_t_m > 0:
+        raise SettingsError(f"seed_grid_t_m {s.seed_grid_t_m}: must be positive (or null)")
+    if s.seed_points < 1 or s.seed_count < 0:
+        raise SettingsError("seed_points must be at least 1 and seed_count not negative")
+
+
+def _check_objective(o: ObjectiveSettings) -> None:
+    if not 0.0 <= o.w_edge <= 1.0:
+        raise SettingsError(f"--w-edge {o.w_edge}: must lie in [0, 1] (w2 = 1 - w1)")
+    if not 0.0 <= o.holdout < 0.9:
+        raise SettingsError(f"holdout {o.holdout}: must lie in [0, 0.9)")
+    if not o.truncation_px > 0:
+        raise SettingsError(f"--truncation {o.truncation_px}: must be positive")
+    if (o.ucb_k is not None and o.ucb_k < 0) or o.contrast < 0:
+        raise SettingsError("ucb_k and contrast must not be negative")
+
+
+def _check_decision(d: DecisionSettings) -> None:
+    if not d.max_deviation_px > 0:
+        raise SettingsError(f"--max-deviation {d.max_deviation_px}: must be positive (px)")
+    if d.rule == "budget" and (d.budget_ms is None or not d.budget_ms > 0):
+        raise SettingsError("--budget-ms must be a positive number of milliseconds")
+    if d.restarts < 0 or d.restarts > 10:
+        raise SettingsError(f"decision.restarts {d.restarts}: between 0 and 10")
+    if not 0.0 < d.restart_share <= 1.0:
+        raise SettingsError(f"decision.restart_share {d.restart_share}: must lie in (0, 1]")
+    if d.refine_iters < 0:
+        raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
+
+
+def _check_motion(m: MotionSettings) -> None:
+    if not abs(m.time_offset_s) <= 1.0:
+        raise SettingsError(f"--time-offset {m.time_offset_s}: at most 1 s either way")
+    if m.points < 1000:
+        raise SettingsError(f"motion.points {m.points}: at least 1000")
+
+
+def _check_features(f: FeatureSettings) -> None:
+    if f.canny_low < 0 or f.canny_low > f.canny_high:
+        raise SettingsError("canny_low must not be negative nor exceed canny_high")
+    if len(f.grid) != 2 or min(f.grid) < 1:
+        raise SettingsError(f"grid {list(f.grid)}: two whole numbers of cells, at least 1")
+    if not 0 <= f.min_range_m < f.max_range_m:
+        raise SettingsError(f"min_range_m {f.min_range_m} and max_range_m {f.max_range_m}: "
+                            "need 0 <= min_range_m < max_range_m")
+    if not f.z_min > 0:
+        raise SettingsError(f"z_min {f.z_min}: must be positive (metres in front of the camera)")
+    negative = [k for k in ("blur_sigma", "min_edge_px", "depth_jump_m", "cross_jump_m",
+                            "cross_jump_rel", "intensity_jump", "smooth_ratio",
+                            "view_margin_px") if (getattr(f, k) or 0) < 0]
+    if negative:
+        raise SettingsError(f"features: {', '.join(negative)} must not be negative")
 
 
 #: The allowed values of every setting that takes a word, by (section, name): the one list the
