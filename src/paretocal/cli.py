@@ -12,6 +12,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
+import click
 import typer
 
 from .errors import ParetocalError, SettingsError
@@ -467,6 +468,12 @@ def batch(
                f"{r['skipped']} already done{rate}; wrote {out / 'summary.csv'}")
 
 
+#: The option parser's usage errors: click's, and those of the click that recent typer
+#: releases carry inside (``typer.BadParameter`` and its kin derive from TyperException there).
+_USAGE_ERRORS = tuple({click.ClickException,
+                       getattr(typer.exceptions, "TyperException", click.ClickException)})
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status."""
     args = sys.argv[1:] if argv is None else list(argv)
@@ -487,21 +494,17 @@ def main(argv: list[str] | None = None) -> int:
     except ParetocalError as exc:
         print(f"paretocal: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, typer.Abort, click.exceptions.Abort):
         print("paretocal: interrupted", file=sys.stderr)
         return 130
+    except (typer.Exit, click.exceptions.Exit) as exc:
+        return int(exc.exit_code)
+    except _USAGE_ERRORS as exc:
+        # A usage error from the option parser (unknown option, bad value, ...).
+        text = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        print(f"paretocal: error: {' '.join(text.split())}", file=sys.stderr)
+        return 2
     except Exception as exc:  # noqa: BLE001 - the last line of defence
-        code = getattr(exc, "exit_code", None)
-        if type(exc).__name__ == "Exit" and isinstance(code, int):
-            return code
-        if type(exc).__name__ == "Abort":
-            print("paretocal: interrupted", file=sys.stderr)
-            return 130
-        if hasattr(exc, "format_message") and isinstance(code, int):
-            # A usage error from the option parser (unknown option, bad value, ...).
-            msg = " ".join(exc.format_message().split())
-            print(f"paretocal: error: {msg}", file=sys.stderr)
-            return 2
         if verbose:
             import traceback
 
