@@ -85,11 +85,6 @@ Z95 = 1.959964
 RESOLUTION_PX = 2.5
 
 
-def _per_frame(objective, X: np.ndarray) -> np.ndarray:
-    """Per-frame objective (C, F) of the candidates X (C, 7), without the sampling charge."""
-    return np.asarray(objective.chamfer(X, ucb_k=0.0)["per_frame"], dtype=np.float64)
-
-
 def _at_full_n(objective, x: np.ndarray) -> np.ndarray:
     x = np.array(x, dtype=np.float64, copy=True)
     x[6] = int(objective.scene.points_per_frame.max())
