@@ -574,6 +574,37 @@ def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     left out.
     """
     entries, offset = _pcd_header(path, raw)
+    fields, types, sizes, counts = _pcd_fields(path, entries)
+    n, data = _pcd_size(path, entries)
+    # One column per field and count; padding fields are named "_" and may repeat.
+    names, formats = [], []
+    for k, (name, t, s, c) in enumerate(zip(fields, types, sizes, counts)):
+        for j in range(c):
+            names.append(name if c == 1 and name != "_" else f"_{k}_{j}_{name}")
+            formats.append(_PCD_TYPES[(t, s)])
+    if len(set(names)) != len(names):
+        raise InputError(f"{path}: PCD header FIELDS names a field twice ({' '.join(fields)})")
+    body = raw[offset:]
+    if n == 0:
+        return {name: np.zeros(0, f) for name, f in zip(names, formats) if name[0] != "_"}
+    if data == "ascii":
+        cols = _pcd_ascii(path, body, names, formats, n)
+    elif data == "binary":
+        dtype = np.dtype({"names": names, "formats": ["<" + f for f in formats]})
+        need = n * dtype.itemsize
+        if len(body) < need:
+            raise InputError(f"{path}: PCD binary data is truncated: {len(body)} bytes for "
+                             f"POINTS {n} of {dtype.itemsize} bytes ({need} bytes)")
+        arr = np.frombuffer(body, dtype=dtype, count=n)
+        cols = {name: arr[name] for name in names}
+    else:
+        cols = dict(zip(names, _pcd_compressed(path, body, types, sizes, counts, n)))
+    return {k: v for k, v in cols.items() if not k.startswith("_")}
+
+
+def _pcd_fields(path: Path, entries: dict) -> tuple[list[str], list[str], list[int], list[int]]:
+    """FIELDS, TYPE (upper case), SIZE and COUNT of a PCD header, checked against each other
+    and against the types this reader decodes."""
     for key in ("FIELDS", "SIZE", "TYPE"):
         if not entries.get(key):
             raise InputError(f"{path}: PCD header has no {key} line")
@@ -597,6 +628,11 @@ def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     for name, c in zip(fields, counts):
         if name.lower() in _SCALAR_FIELDS and c != 1:
             raise InputError(f"{path}: PCD field {name!r} has COUNT {c}, expected 1")
+    return fields, types, sizes, counts
+
+
+def _pcd_size(path: Path, entries: dict) -> tuple[int, str]:
+    """The number of points and the DATA kind of a PCD header."""
     width = _pcd_int(path, entries, "WIDTH") if "WIDTH" in entries else None
     height = _pcd_int(path, entries, "HEIGHT") if "HEIGHT" in entries else 1
     if "POINTS" in entries:
@@ -610,40 +646,22 @@ def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     data = (entries["DATA"] or [""])[0].lower()
     if data not in _PCD_DATA:
         raise InputError(f"{path}: PCD header DATA {data!r} is not one of {', '.join(_PCD_DATA)}")
-    # One column per field and count; padding fields are named "_" and may repeat.
-    names, formats = [], []
-    for k, (name, t, s, c) in enumerate(zip(fields, types, sizes, counts)):
-        for j in range(c):
-            names.append(name if c == 1 and name != "_" else f"_{k}_{j}_{name}")
-            formats.append(_PCD_TYPES[(t, s)])
-    if len(set(names)) != len(names):
-        raise InputError(f"{path}: PCD header FIELDS names a field twice ({' '.join(fields)})")
-    dtype = np.dtype({"names": names, "formats": ["<" + f for f in formats]})
-    body = raw[offset:]
-    if n == 0:
-        return {name: np.zeros(0, f) for name, f in zip(names, formats) if name[0] != "_"}
-    if data == "ascii":
-        # Whitespace-separated values, one point per line (tolerant of tabs and trailing blanks).
-        try:
-            table = _loadtxt(body)
-        except ValueError as exc:
-            raise InputError(f"{path}: PCD ascii data cannot be parsed ({_first_line(exc)})") from None
-        if table.shape != (n, len(names)):
-            raise InputError(f"{path}: PCD ascii data has {table.shape[0]} rows of "
-                             f"{table.shape[1] if table.size else 0} values; the header says "
-                             f"POINTS {n} of {len(names)} values (truncated or wrong header)")
-        cols = {name: _ascii_column(table[:, j], f)
-                for j, (name, f) in enumerate(zip(names, formats)) if name[0] != "_"}
-    elif data == "binary":
-        need = n * dtype.itemsize
-        if len(body) < need:
-            raise InputError(f"{path}: PCD binary data is truncated: {len(body)} bytes for "
-                             f"POINTS {n} of {dtype.itemsize} bytes ({need} bytes)")
-        arr = np.frombuffer(body, dtype=dtype, count=n)
-        cols = {name: arr[name] for name in names}
-    else:
-        cols = dict(zip(names, _pcd_compressed(path, body, types, sizes, counts, n)))
-    return {k: v for k, v in cols.items() if not k.startswith("_")}
+    return n, data
+
+
+def _pcd_ascii(path: Path, body: bytes, names: list[str], formats: list[str],
+               n: int) -> dict[str, np.ndarray]:
+    """Whitespace-separated values, one point per line (tolerant of tabs and trailing blanks)."""
+    try:
+        table = _loadtxt(body)
+    except ValueError as exc:
+        raise InputError(f"{path}: PCD ascii data cannot be parsed ({_first_line(exc)})") from None
+    if table.shape != (n, len(names)):
+        raise InputError(f"{path}: PCD ascii data has {table.shape[0]} rows of "
+                         f"{table.shape[1] if table.size else 0} values; the header says "
+                         f"POINTS {n} of {len(names)} values (truncated or wrong header)")
+    return {name: _ascii_column(table[:, j], f)
+            for j, (name, f) in enumerate(zip(names, formats)) if name[0] != "_"}
 
 
 def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
