@@ -713,13 +713,47 @@ def _read_ply(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     end = re.search(rb"(^|\n)end_header[ \t]*\r?\n", raw[:1 << 20])
     if end is None:
         raise InputError(f"{path}: PLY header has no 'end_header' line")
-    offset = end.end()
     try:
         header = raw[:end.start()].decode("ascii").splitlines()[1:]
     except UnicodeDecodeError:
         raise InputError(f"{path}: PLY header is not text") from None
+    fmt, elements = _ply_header(path, header)
+    names = [e[0] for e in elements]
+    if "vertex" not in names:
+        raise InputError(f"{path}: PLY file has no 'vertex' element")
+    iv = names.index("vertex")
+    _, n, props = elements[iv]
+    lists = [p for p, t in props if t is None]
+    if lists:
+        raise InputError(f"{path}: PLY vertex property {lists[0]!r} is a list; points need "
+                         "scalar properties")
+    pnames = [p for p, _ in props]
+    if len(set(pnames)) != len(pnames):
+        raise InputError(f"{path}: PLY vertex element names a property twice")
+    body = raw[end.end():]
+    if fmt == "ascii":
+        return _ply_ascii(path, body, elements, iv)
+    endian = _PLY_FORMATS[fmt]
+    start = 0
+    for name, count, eprops in elements[:iv]:
+        if any(t is None for _, t in eprops):
+            raise InputError(f"{path}: PLY element {name!r} before 'vertex' has list "
+                             "properties; binary files with that layout are not supported")
+        start += count * sum(np.dtype(t).itemsize for _, t in eprops)
+    dtype = np.dtype([(p, endian + t) for p, t in props])
+    need = start + n * dtype.itemsize
+    if len(body) < need:
+        raise InputError(f"{path}: PLY binary data is truncated: {len(body)} bytes after the "
+                         f"header, {need} needed for {n} vertices of {dtype.itemsize} bytes")
+    arr = np.frombuffer(body, dtype=dtype, count=n, offset=start)
+    return {p: arr[p] for p in pnames}
+
+
+def _ply_header(path: Path, header: list[str]) -> tuple[str, list[list]]:
+    """The format and the elements of a PLY header (its lines after ``ply``): each element as
+    ``[name, count, [(property, numpy type), or (property, None) for a list]]``."""
     fmt = None
-    elements: list[list] = []  # [name, count, [(property, type) or (property, None) for lists]]
+    elements: list[list] = []
     for line in header:
         words = line.split()
         if not words or words[0] in ("comment", "obj_info"):
@@ -735,65 +769,42 @@ def _read_ply(path: Path, raw: bytes) -> dict[str, np.ndarray]:
                 if elements[-1][1] < 0:
                     raise ValueError
             elif words[0] == "property":
-                if not elements:
-                    raise ValueError
-                if words[1] == "list":
-                    elements[-1][2].append((words[4], None))
-                else:
-                    if words[1] not in _PLY_TYPES:
-                        raise InputError(f"{path}: PLY property {words[2]!r} has unknown type "
-                                         f"{words[1]!r}")
-                    elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
+                elements[-1][2].append(_ply_property(path, words))
             else:
                 raise ValueError
         except (IndexError, ValueError):
             raise InputError(f"{path}: malformed PLY header line {line!r}") from None
     if fmt is None:
         raise InputError(f"{path}: PLY header has no 'format' line")
-    names = [e[0] for e in elements]
-    if "vertex" not in names:
-        raise InputError(f"{path}: PLY file has no 'vertex' element")
-    iv = names.index("vertex")
+    return fmt, elements
+
+
+def _ply_property(path: Path, words: list[str]) -> tuple[str, str | None]:
+    """``(name, numpy type)`` of a ``property`` line, ``(name, None)`` for a list property."""
+    if words[1] == "list":
+        return words[4], None
+    if words[1] not in _PLY_TYPES:
+        raise InputError(f"{path}: PLY property {words[2]!r} has unknown type {words[1]!r}")
+    return words[2], _PLY_TYPES[words[1]]
+
+
+def _ply_ascii(path: Path, body: bytes, elements: list[list], iv: int) -> dict[str, np.ndarray]:
+    """The vertex columns of ascii PLY data: one line per element instance, the lines of the
+    elements before the vertices skipped."""
     _, n, props = elements[iv]
-    lists = [p for p, t in props if t is None]
-    if lists:
-        raise InputError(f"{path}: PLY vertex property {lists[0]!r} is a list; points need "
-                         "scalar properties")
-    pnames = [p for p, _ in props]
-    if len(set(pnames)) != len(pnames):
-        raise InputError(f"{path}: PLY vertex element names a property twice")
-    body = raw[offset:]
-    if fmt == "ascii":
-        # One line per element instance: skip the lines of the elements before the vertices.
-        skip = sum(e[1] for e in elements[:iv])
-        if n == 0:
-            return {p: np.zeros(0, t) for p, t in props}
-        try:
-            table = _loadtxt(body, skiprows=skip, max_rows=n)
-        except ValueError as exc:
-            raise InputError(f"{path}: PLY ascii vertex data cannot be parsed "
-                             f"({_first_line(exc)})") from None
-        if table.shape != (n, len(pnames)):
-            raise InputError(f"{path}: PLY ascii data has {table.shape[0]} vertex lines of "
-                             f"{table.shape[1] if table.size else 0} values; the header says "
-                             f"{n} of {len(pnames)} (truncated or wrong header)")
-        cols = {p: _ascii_column(table[:, j], t) for j, (p, t) in enumerate(props)}
-    else:
-        endian = _PLY_FORMATS[fmt]
-        start = 0
-        for name, count, eprops in elements[:iv]:
-            if any(t is None for _, t in eprops):
-                raise InputError(f"{path}: PLY element {name!r} before 'vertex' has list "
-                                 "properties; binary files with that layout are not supported")
-            start += count * sum(np.dtype(t).itemsize for _, t in eprops)
-        dtype = np.dtype([(p, endian + t) for p, t in props])
-        need = start + n * dtype.itemsize
-        if len(body) < need:
-            raise InputError(f"{path}: PLY binary data is truncated: {len(body)} bytes after the "
-                             f"header, {need} needed for {n} vertices of {dtype.itemsize} bytes")
-        arr = np.frombuffer(body, dtype=dtype, count=n, offset=start)
-        cols = {p: arr[p] for p in pnames}
-    return cols
+    if n == 0:
+        return {p: np.zeros(0, t) for p, t in props}
+    skip = sum(e[1] for e in elements[:iv])
+    try:
+        table = _loadtxt(body, skiprows=skip, max_rows=n)
+    except ValueError as exc:
+        raise InputError(f"{path}: PLY ascii vertex data cannot be parsed "
+                         f"({_first_line(exc)})") from None
+    if table.shape != (n, len(props)):
+        raise InputError(f"{path}: PLY ascii data has {table.shape[0]} vertex lines of "
+                         f"{table.shape[1] if table.size else 0} values; the header says "
+                         f"{n} of {len(props)} (truncated or wrong header)")
+    return {p: _ascii_column(table[:, j], t) for j, (p, t) in enumerate(props)}
 
 
 def _require_file(path: Path, what: str) -> None:
