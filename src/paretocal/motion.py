@@ -842,14 +842,8 @@ def estimate_motion(clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
         if not np.isfinite(pair_xi).any():
             break
         shared_xi = np.nanmean(pair_xi, axis=0)
-        new = []
-        for k in range(K):
-            if per_frame:
-                rows = [pair_xi[j] for j in (k - 1, k) if 0 <= j < K - 1 and np.isfinite(pair_xi[j]).all()]
-                xi = np.mean(rows, axis=0) if rows else shared_xi
-            else:
-                xi = shared_xi
-            new.append(Twist(xi[:3], xi[3:]))
+        new = (_frame_twists(pair_xi, np.isfinite(pair_xi).all(axis=1), shared_xi) if per_frame
+               else [Twist(shared_xi[:3], shared_xi[3:])] * K)
         change = max(np.linalg.norm(a.v - b.v) * sweep + np.linalg.norm(a.w - b.w) * sweep * med_range
                      for a, b in zip(new, twists))
         twists = new
@@ -860,23 +854,7 @@ def estimate_motion(clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
             break
 
     ok = np.array([f is not None for f in fits])
-    info = np.zeros((K - 1, 6))
-    share = np.zeros((K - 1, 3))
-    min_eig = np.zeros(K - 1)
-    weakest = np.zeros((K - 1, 3))
-    hess = np.zeros((K - 1, 6, 6))
-    se = np.full((K - 1, 6), np.inf)
-    inl = np.zeros(K - 1, dtype=int)
-    for k, f in enumerate(fits):
-        if f is None:
-            continue
-        hess[k] = f.H
-        info[k], share[k], vals, vecs = _conditioning(f.H)
-        min_eig[k] = vals[0]
-        weakest[k] = vecs[:, 0] * np.sign(vecs[np.argmax(np.abs(vecs[:, 0])), 0])
-        with np.errstate(divide="ignore"):
-            se[k] = 1.0 / np.sqrt(info[k]) / dtau[k]
-        inl[k] = f.inliers
+    info, share, min_eig, weakest, hess, se, inl = _pair_conditioning(fits, dtau)
     observable = np.median(share[ok], axis=0) >= min_share if ok.any() else np.zeros(3, bool)
     good = pair_xi[ok]
     speeds = np.linalg.norm(good[:, :3], axis=1)
@@ -887,11 +865,7 @@ def estimate_motion(clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
                 if ok.any() and residual_sample > 0 else np.full(K - 1, np.nan))
     residual[~ok] = np.nan
     shared = np.nanmean(pair_xi, axis=0) if ok.any() else np.zeros(6)
-    frame_tw = []
-    for k in range(K):
-        rows = [pair_xi[j] for j in (k - 1, k) if 0 <= j < K - 1 and ok[j]]
-        xi = np.mean(rows, axis=0) if rows else shared
-        frame_tw.append(Twist(xi[:3], xi[3:]))
+    frame_tw = _frame_twists(pair_xi, ok, shared)
     est = MotionEstimate(
         ref_times=tau, twist=Twist(shared[:3], shared[3:]), frame_twists=frame_tw,
         pair_twists=pair_xi, pair_poses=poses, pair_se=se, information=info, share=share,
@@ -907,6 +881,40 @@ def estimate_motion(clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
                     "".join(a for a, o in zip("xyz", observable) if not o) or "-",
                     np.round(np.median(share[ok], axis=0), 5) if ok.any() else "n/a", min_share)
     return est
+
+
+def _frame_twists(pair_xi: np.ndarray, ok: np.ndarray, shared: np.ndarray) -> list[Twist]:
+    """Each frame's twist: the mean of its adjacent pairs' twists that are ``ok`` (K - 1,), or
+    ``shared`` (6,) when it has none; ``pair_xi`` is (K - 1, 6)."""
+    K = len(pair_xi) + 1
+    out = []
+    for k in range(K):
+        rows = [pair_xi[j] for j in (k - 1, k) if 0 <= j < K - 1 and ok[j]]
+        xi = np.mean(rows, axis=0) if rows else shared
+        out.append(Twist(xi[:3], xi[3:]))
+    return out
+
+
+def _pair_conditioning(fits: list, dtau: np.ndarray):
+    """Per registered pair: information and constraint share per axis, smallest eigenvalue and
+    weakest direction of the translation Hessian, the Hessian, standard errors of the twist
+    (per second) and inliers; zeros (and infinite errors) for a failed pair."""
+    P = len(fits)
+    info, share = np.zeros((P, 6)), np.zeros((P, 3))
+    min_eig, weakest = np.zeros(P), np.zeros((P, 3))
+    hess, se = np.zeros((P, 6, 6)), np.full((P, 6), np.inf)
+    inl = np.zeros(P, dtype=int)
+    for k, f in enumerate(fits):
+        if f is None:
+            continue
+        hess[k] = f.H
+        info[k], share[k], vals, vecs = _conditioning(f.H)
+        min_eig[k] = vals[0]
+        weakest[k] = vecs[:, 0] * np.sign(vecs[np.argmax(np.abs(vecs[:, 0])), 0])
+        with np.errstate(divide="ignore"):
+            se[k] = 1.0 / np.sqrt(info[k]) / dtau[k]
+        inl[k] = f.inliers
+    return info, share, min_eig, weakest, hess, se, inl
 
 
 # ----------------------------------------------------------------------------- time offset
