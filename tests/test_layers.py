@@ -70,3 +70,20 @@ def test_layers_only_look_down():
             if target in RANKS and RANKS[target] > RANKS[me]:
                 upward.append(f"{path.relative_to(ROOT)} imports {target}")
     assert not upward, "\n".join(upward)
+
+
+def test_lint_and_complexity():
+    """ruff with the project's rules (pyproject.toml: pyflakes, pycodestyle, bugbear and a
+    cyclomatic complexity of at most 20 per function) finds nothing."""
+    import importlib.util
+    import subprocess
+    import sys
+
+    import pytest
+
+    if importlib.util.find_spec("ruff") is None:
+        pytest.skip("ruff is not installed (it comes with the test extras: pip install -e .[test])")
+    top = ROOT.parent.parent
+    proc = subprocess.run([sys.executable, "-m", "ruff", "check", "src", "tests", "benchmarks"],
+                          cwd=top, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr

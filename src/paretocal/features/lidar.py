@@ -72,6 +72,56 @@ def _between_rays(p: np.ndarray, q: np.ndarray, r: np.ndarray, t: float) -> np.n
     return m / np.linalg.norm(m, axis=1, keepdims=True) * r[:, None]
 
 
+def _ring_neighbours(ring: np.ndarray, psi: np.ndarray, max_gap_deg: float | None,
+                     times: tuple[np.ndarray, float] | None):
+    """Circular neighbours along each ring (the ring's start follows its end).
+
+    ``ring`` and ``psi`` (azimuth, rad) are (n,), sorted by ring then azimuth. Returns the next
+    and previous index along the ring, whether each is a usable neighbour (within the azimuth
+    gap, not the point itself, and, with ``times = (t, max_dt)``, recorded within ``max_dt`` s
+    of it) and the gap (rad): ``max_gap_deg``, by default :data:`MAX_GAP_STEPS` median azimuth
+    steps.
+    """
+    n = len(ring)
+    first = np.r_[True, ring[1:] != ring[:-1]]
+    last = np.r_[ring[1:] != ring[:-1], True]
+    start_of = np.maximum.accumulate(np.where(first, np.arange(n), 0))
+    end_idx = np.flatnonzero(last)
+    end_of = end_idx[np.cumsum(first) - 1]
+    nxt = np.where(last, start_of, np.arange(n) + 1)
+    prv = np.where(first, end_of, np.arange(n) - 1)
+    if max_gap_deg is None:
+        step = np.mod(psi[nxt] - psi, 2 * np.pi)
+        step = step[(step > 0) & (nxt != np.arange(n))]
+        max_gap_deg = MAX_GAP_STEPS * float(np.degrees(np.median(step))) if len(step) else 1.0
+    gap = np.radians(max_gap_deg)
+    dpsi_n = np.mod(psi[nxt] - psi, 2 * np.pi)
+    dpsi_p = np.mod(psi - psi[prv], 2 * np.pi)
+    ok_n = (dpsi_n < gap) & (nxt != np.arange(n))
+    ok_p = (dpsi_p < gap) & (prv != np.arange(n))
+    if times is not None:
+        t, max_dt = times
+        ok_n &= np.abs(t[nxt] - t) < max_dt
+        ok_p &= np.abs(t[prv] - t) < max_dt
+    return nxt, prv, ok_n, ok_p, gap
+
+
+def _ring_geometry(ring_elevation_deg, n_rings: int, ring_spacing_deg: float | None,
+                   cross_jump_rel: float | None) -> tuple[np.ndarray | None, float | None]:
+    """The rings' elevations (deg, None unless known and finite for every ring) and the
+    relative cross-ring jump: as given, else (without elevations) from the ring spacing at the
+    shallowest grazing angle (:data:`GRAZING_MIN_DEG`)."""
+    el = None
+    if ring_elevation_deg is not None and len(ring_elevation_deg) >= n_rings > 1:
+        el = np.asarray(ring_elevation_deg, dtype=np.float64)
+        if not np.isfinite(el[:n_rings]).all():
+            el = None
+    if cross_jump_rel is None and el is None:
+        spacing = ring_spacing_deg if ring_spacing_deg and np.isfinite(ring_spacing_deg) else 0.42
+        cross_jump_rel = np.radians(spacing) / np.tan(np.radians(GRAZING_MIN_DEG))
+    return el, cross_jump_rel
+
+
 def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
                    cross_jump_m: float = 0.3, cross_jump_rel: float | None = None,
                    ground_tol_m: float | None = None,
@@ -199,26 +249,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
     scale = float(np.percentile(pts[:, 3], 99)) if len(pts) else 0.0
     refl = refl / scale if scale > 0 else np.zeros_like(refl)
 
-    # Circular neighbours within each ring (the ring's start follows its end).
-    first = np.r_[True, ring[1:] != ring[:-1]]
-    last = np.r_[ring[1:] != ring[:-1], True]
-    start_of = np.maximum.accumulate(np.where(first, np.arange(n), 0))
-    end_idx = np.flatnonzero(last)
-    end_of = end_idx[np.cumsum(first) - 1]
-    nxt = np.where(last, start_of, np.arange(n) + 1)
-    prv = np.where(first, end_of, np.arange(n) - 1)
-    if max_gap_deg is None:
-        step = np.mod(psi[nxt] - psi, 2 * np.pi)
-        step = step[(step > 0) & (nxt != np.arange(n))]
-        max_gap_deg = MAX_GAP_STEPS * float(np.degrees(np.median(step))) if len(step) else 1.0
-    gap = np.radians(max_gap_deg)
-    dpsi_n = np.mod(psi[nxt] - psi, 2 * np.pi)
-    dpsi_p = np.mod(psi - psi[prv], 2 * np.pi)
-    ok_n = (dpsi_n < gap) & (nxt != np.arange(n))
-    ok_p = (dpsi_p < gap) & (prv != np.arange(n))
-    if t is not None:
-        ok_n &= np.abs(t[nxt] - t) < max_dt
-        ok_p &= np.abs(t[prv] - t) < max_dt
+    nxt, prv, ok_n, ok_p, gap = _ring_neighbours(ring, psi, max_gap_deg,
+                                                 None if t is None else (t, max_dt))
 
     # Along-ring depth edges: the near side of a jump to either neighbour.
     jump_n = np.where(ok_n, r[nxt] - r, 0.0)
@@ -243,14 +275,8 @@ def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring:
                                        along_fraction)
     strength = np.where(is_edge, jump, 0.0)
 
-    el = None
-    if ring_elevation_deg is not None and len(ring_elevation_deg) >= n_rings > 1:
-        el = np.asarray(ring_elevation_deg, dtype=np.float64)
-        if not np.isfinite(el[:n_rings]).all():
-            el = None
-    if cross_jump_rel is None and el is None:
-        spacing = ring_spacing_deg if ring_spacing_deg and np.isfinite(ring_spacing_deg) else 0.42
-        cross_jump_rel = np.radians(spacing) / np.tan(np.radians(GRAZING_MIN_DEG))
+    el, cross_jump_rel = _ring_geometry(ring_elevation_deg, n_rings, ring_spacing_deg,
+                                        cross_jump_rel)
     if cross_ring:
         on_ground = np.zeros(n, dtype=bool)
         if ground_tol_m is not None:
