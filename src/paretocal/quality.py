@@ -38,6 +38,13 @@ def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float =
     return newton_step(g[None], H[None], h, max_units)[0]
 
 
+def at_every_point(objective, x: np.ndarray) -> np.ndarray:
+    """A copy of the solution ``x`` (7,) with ``n`` set to every feature point of the frames."""
+    x = np.array(x, dtype=np.float64, copy=True)
+    x[6] = int(objective.scene.points_per_frame.max())
+    return x
+
+
 def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> dict:
     """Curvature, identifiability and frame agreement of the extrinsic ``x``.
 
@@ -56,8 +63,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     direction, ``jackknife_se`` per axis, ``frame_steps`` (each frame's Newton step), and
     ``well_observed`` per axis.
     """
-    x = np.array(x, dtype=np.float64, copy=True)
-    x[6] = int(objective.scene.points_per_frame.max())
+    x = at_every_point(objective, x)
     S = _fd_stencil(h)
     cand = np.tile(x, (len(S), 1))
     cand[:, :6] += S
@@ -116,8 +122,7 @@ def local_optimum(objective, x: np.ndarray, iters: int = 15):
     """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,)."""
     from .search.polish import newton_polish, polish
 
-    x = np.array(x, dtype=np.float64, copy=True)
-    x[6] = int(objective.scene.points_per_frame.max())
+    x = at_every_point(objective, x)
     fun = lambda Z: objective.chamfer(Z, ucb_k=0.0)["f1"]  # noqa: E731
     Z, _, _ = newton_polish(fun, x[None], iters=iters)
     Z, _, _ = polish(fun, Z, step=np.array([0.005] * 3 + [0.05] * 3))
@@ -142,5 +147,5 @@ def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
     return correction_params(invert(T_from) @ T_to)
 
 
-__all__ = ["AXES", "correction_between", "correction_matrix", "displacement_px",
+__all__ = ["AXES", "at_every_point", "correction_between", "correction_matrix", "displacement_px",
            "local_optimum", "neighbour_fraction", "quality_report"]

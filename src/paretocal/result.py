@@ -87,17 +87,17 @@ class CalibrationResult:
 
     @property
     def reference_error(self) -> dict | None:
-        if self.T_ref is None:
-            return None
-        e = pose_error(self.T_cam_lidar, self.T_ref)
-        return {k: float(v) for k, v in e.items()}
+        return self._against_reference(self.T_cam_lidar)
 
     @property
     def initial_error(self) -> dict | None:
+        return self._against_reference(self.T_init)
+
+    def _against_reference(self, T: np.ndarray) -> dict | None:
+        """:func:`pose_error` of ``T`` against the reference, None without one."""
         if self.T_ref is None:
             return None
-        e = pose_error(self.T_init, self.T_ref)
-        return {k: float(v) for k, v in e.items()}
+        return {k: float(v) for k, v in pose_error(T, self.T_ref).items()}
 
     def objectives(self) -> dict[str, float]:
         i, c = self.chosen, self.front.columns

@@ -31,7 +31,7 @@ import numpy as np
 from .features.lidar import GROUP_NAMES
 from .features.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import AXES, TO_REPORT, displacement_px, local_optimum
+from .quality import AXES, TO_REPORT, at_every_point, displacement_px, local_optimum
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -83,12 +83,6 @@ Z95 = 1.959964
 #: in pitch on 16 beams); 1 px covered yaw in 18 of 32 good trials, 2 px pitch in 30 of 32,
 #: 2.5 px every axis of every good trial (benchmarks/trust.py).
 RESOLUTION_PX = 2.5
-
-
-def _at_full_n(objective, x: np.ndarray) -> np.ndarray:
-    x = np.array(x, dtype=np.float64, copy=True)
-    x[6] = int(objective.scene.points_per_frame.max())
-    return x
 
 
 def restart_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
@@ -183,7 +177,7 @@ def contrast_evidence(objective, settings, x_opt: np.ndarray, poses: int = CONTR
     s = settings.search
     rng = np.random.default_rng(s.seed if rng is None else rng)
     half = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
-    P = np.tile(_at_full_n(objective, x_opt), (poses + 1, 1))
+    P = np.tile(at_every_point(objective, x_opt), (poses + 1, 1))
     P[1:, :6] += rng.uniform(-1.0, 1.0, (poses, 6)) * half
     out = objective.chamfer(P, ucb_k=0.0)
     per = np.asarray(out["per_frame"], dtype=np.float64)
@@ -226,8 +220,9 @@ def intervals(quality: dict, res_per_px: np.ndarray, settings) -> dict:
     Returns
     -------
     dict
-        ``half_width`` per axis (NaN when not determined), ``determined`` per axis, ``units``,
-        and ``undetermined`` (list of axis names). The true extrinsic lies, per axis, within
+        ``half_width`` per axis (None when not determined), ``determined`` per axis,
+        ``units``, ``undetermined`` (list of axis names) and ``resolution_per_px`` (report
+        units per pixel). The true extrinsic lies, per axis, within
         ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width`` (the search's correction axes:
         translation in the LiDAR frame, ZYX angles).
     """
@@ -265,8 +260,6 @@ def reliability(result: "CalibrationResult") -> dict:
     correction stopped by a search bound (or a local optimum beyond it), or frames that
     disagree (jackknife standard errors). Thresholds: the ``RELIABLE_*`` constants.
     """
-    from .quality import AXES
-
     reasons = []
     n_frames = len(result.frames)
     # Frames passed are not frames that count: one with no feature points in view adds none.
