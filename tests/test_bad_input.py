@@ -501,14 +501,14 @@ def test_sparse_frames(capfd, tmp_path, rig, raw_frames):
 
 
 def test_one_sparse_frame_among_good_ones_is_a_warning(raw_frames, caplog):
-    from paretocal.pipeline import _check_scene, prepare_features
+    from paretocal.pipeline import check_scene, prepare_features
 
     frames = [raw_frames[0], dataclasses.replace(raw_frames[1],
                                                  points=raw_frames[1].points[::2000])]
     T = raw_frames[0].T_ref
     feats = prepare_features(frames, T, Settings())
     with caplog.at_level(logging.WARNING, logger="paretocal"):
-        _check_scene(feats, frames, T)
+        check_scene(feats, frames, T)
     assert f"frame(s) {raw_frames[1].name} (" in caplog.text
     assert "fewer than 30 LiDAR feature points in view" in caplog.text
 

@@ -344,6 +344,6 @@ def test_importing_the_figures_leaves_matplotlib_alone(tmp_path):
             "assert matplotlib.get_backend() == 'svg', matplotlib.get_backend(); "
             "import sys; assert 'matplotlib.pyplot' not in sys.modules; "
             "fig, ax = f.subplots(1, 2, figsize=(4, 2)); ax[0].plot([0, 1]); "
-            f"f._save(fig, {str(tmp_path / 'x.png')!r})")
+            f"f.save_figure(fig, {str(tmp_path / 'x.png')!r})")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert (tmp_path / "x.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -87,3 +87,17 @@ def test_lint_and_complexity():
     proc = subprocess.run([sys.executable, "-m", "ruff", "check", "src", "tests", "benchmarks"],
                           cwd=top, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_no_private_name_crosses_a_module():
+    """A name with a leading underscore is the module's own: no other module imports it."""
+    crossing = []
+    for path in sorted(ROOT.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (
+                    node.level or (node.module or "").split(".")[0] == "paretocal"):
+                crossing += [f"{path.relative_to(ROOT)}:{node.lineno} imports {a.name}"
+                             for a in node.names
+                             if a.name.startswith("_") and not a.name.startswith("__")]
+    assert not crossing, "\n".join(crossing)

@@ -27,7 +27,7 @@ from .search.checkpoint import Checkpoint, fingerprint
 from .inputs import (compensate_motion, locate_lidar, resolve_init, sweep_rings,  # noqa: F401
                      warn_rings, warn_unlocated, describe_inputs)
 from .result import CalibrationResult, Front  # noqa: F401
-from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, _check_scene, feature_counts,  # noqa: F401
+from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
                     holdout_score, n_range, prepare_features)
 from .verdict import (MIN_POINTS_PER_FRAME, RELIABLE_MIN_FRAMES, gather_evidence,  # noqa: F401
                       reliability, verdict_text)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import correction_matrix
-from .search.polish import DEFAULT_FD_STEP, _fd_stencil, newton_step, stencil_derivatives
+from .search.polish import DEFAULT_FD_STEP, fd_stencil, newton_step, stencil_derivatives
 
 AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
@@ -64,7 +64,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     ``well_observed`` per axis.
     """
     x = at_every_point(objective, x)
-    S = _fd_stencil(h)
+    S = fd_stencil(h)
     cand = np.tile(x, (len(S), 1))
     cand[:, :6] += S
     per_frame = objective.chamfer(cand, ucb_k=0.0)["per_frame"]              # (28, F)

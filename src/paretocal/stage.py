@@ -46,7 +46,7 @@ def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings
     return out
 
 
-def _check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
+def check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
                  T_view: np.ndarray | None = None, z_min: float = 0.1) -> None:
     """Refuse scenes that cannot constrain the extrinsic, saying which frames and why.
 
@@ -138,7 +138,7 @@ class Stage:
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
                  settings: Settings, progress=None, rings: list[Rings] | None = None):
         feats_all = prepare_features(frames, T_view, settings, progress, rings)
-        _check_scene(feats_all, frames, T_view, settings.features.z_min)
+        check_scene(feats_all, frames, T_view, settings.features.z_min)
         o, z_min = settings.objective, settings.features.z_min
         parts = [f.split(o.holdout) for f in feats_all]
         self.feats = [p[0] for p in parts]

@@ -359,7 +359,7 @@ def _votes(te: np.ndarray, inv: np.ndarray, H: np.ndarray, n_a: int) -> np.ndarr
     return (np.arange(len(H))[:, None] * n_a + ia)[ok]
 
 
-def _extract_lines(te: np.ndarray, inv: np.ndarray) -> list[tuple[float, float, float]]:
+def extract_lines(te: np.ndarray, inv: np.ndarray) -> list[tuple[float, float, float]]:
     """Greedy Hough extraction: strongest line first, its points' votes removed, repeat.
 
     Returns ``(a, h, sigma)`` per line found.
@@ -521,7 +521,7 @@ def rings_from_lines(points: np.ndarray, rng: np.random.Generator | int | None =
         return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
                      [f"only {len(idx)} returns beyond {MIN_AXIS_DISTANCE_M} m of the axis"])
     sample = np.sort(rng.choice(idx, min(len(idx), HOUGH_SAMPLE), replace=False))
-    lines = _extract_lines(te[sample], inv[sample])
+    lines = extract_lines(te[sample], inv[sample])
     if not lines:
         return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
                      ["no laser ring found in the line model"])

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import maximum_filter
 
-from .rings import MIN_RING_POINTS, MIN_RINGS, _extract_lines, nearest_line
+from .rings import MIN_RING_POINTS, MIN_RINGS, extract_lines, nearest_line
 
 #: The axis is searched within this distance (m) of the cloud's origin: vehicle frames put the
 #: sensor on the roof or a bumper, within 3 m of the reference point of cars and trucks.
@@ -573,7 +573,7 @@ def fit_line_model(points: np.ndarray, R: np.ndarray, o: np.ndarray,
                 if len(cand) >= MIN_RING_POINTS * 4:
                     if len(cand) > NEW_LINE_SAMPLE:
                         cand = cand[np.linspace(0, len(cand) - 1, NEW_LINE_SAMPLE).astype(int)]
-                    new = _extract_lines(te[cand], inv[cand])
+                    new = extract_lines(te[cand], inv[cand])
                     if new:
                         a = np.r_[a, [v[0] for v in new]]
                         h = np.r_[h, [v[1] for v in new]]

@@ -27,7 +27,7 @@ def subplots(nrows: int = 1, ncols: int = 1, figsize=None, dpi=None, **kw):
     return fig, fig.subplots(nrows, ncols, **kw)
 
 
-def _save(fig, path: Path, dpi: int = 120) -> None:
+def save_figure(fig, path: Path, dpi: int = 120) -> None:
     with atomic_path(Path(path)) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
 
@@ -102,7 +102,7 @@ def pareto_figure(result, path: Path) -> None:
         fig.suptitle(textwrap.fill(verdict_text(rel), 40 * panels), fontsize=10,
                      color="darkgreen" if ok else "darkred", fontweight="bold")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def draw_overlay(ax, frame: Frame, T: np.ndarray, z_min: float = 0.1,
@@ -133,4 +133,4 @@ def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
     fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{k} points in view, colour = depth "
              f"0-{max_depth:g} m   {KITTI_CREDIT}", fontsize=7, va="center", ha="right",
              color="0.3")
-    _save(fig, path, dpi=100)
+    save_figure(fig, path, dpi=100)

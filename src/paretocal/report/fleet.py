@@ -8,7 +8,7 @@ import numpy as np
 
 from matplotlib import colormaps
 
-from .figures import _save, subplots
+from .figures import save_figure, subplots
 
 
 def fleet_figure(rows: list[dict], path: Path) -> None:
@@ -43,4 +43,4 @@ def fleet_figure(rows: list[dict], path: Path) -> None:
     axes[0].legend(fontsize=8, loc="best")
     axes[0].set_title("Fleet: how far each calibration moved the vehicle's extrinsic", loc="left")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)

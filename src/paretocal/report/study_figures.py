@@ -8,7 +8,7 @@ import numpy as np
 
 from matplotlib.colors import Normalize
 
-from .figures import KITTI_CREDIT, _save, draw_overlay, new_figure, subplots
+from .figures import KITTI_CREDIT, save_figure, draw_overlay, new_figure, subplots
 
 STAR = dict(s=240, marker="*", color="tab:red", edgecolor="k", zorder=5)
 
@@ -66,7 +66,7 @@ def pareto_front(result, path: Path) -> None:
     b.set_xlabel("f2: normalised cost")
     b.grid(alpha=0.3)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def solution_space(result, path: Path) -> None:
@@ -94,7 +94,7 @@ def solution_space(result, path: Path) -> None:
         ax.tick_params(labelsize=7)
         ax.legend(fontsize=7, loc="upper left")
     fig.colorbar(sc, ax=fig.axes, shrink=0.6, label="log10 n (points per frame)")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def single_objective(so: dict, path: Path) -> None:
@@ -125,7 +125,7 @@ def single_objective(so: dict, path: Path) -> None:
     b.grid(alpha=0.3)
     b.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def epsilon_constraint(result, rows: list[dict], path: Path) -> None:
@@ -155,7 +155,7 @@ def epsilon_constraint(result, rows: list[dict], path: Path) -> None:
     b.set_title("Gap to the front (below 0: beats the front)")
     b.grid(alpha=0.3, axis="y")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def decision(result, path: Path) -> dict:
@@ -196,7 +196,7 @@ def decision(result, path: Path) -> dict:
     b.grid(alpha=0.3)
     b.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return {"region": region}
 
 
@@ -213,7 +213,7 @@ def projections(frame, result, path: Path, max_depth: float = 30.0) -> None:
     fig.text(0.99, 0.005, f"frame {frame.name}; colour = depth 0-{max_depth:g} m; {KITTI_CREDIT}",
              ha="right", fontsize=7, color="0.3")
     fig.tight_layout()
-    _save(fig, path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 def innovization(X: np.ndarray, F: np.ndarray, corr: list[dict], fits: dict, path: Path) -> None:
@@ -270,7 +270,7 @@ def innovization(X: np.ndarray, F: np.ndarray, corr: list[dict], fits: dict, pat
     a.grid(alpha=0.3, which="both")
     a.legend(fontsize=8, ncol=2)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def robustness(rows: list[dict], summary: dict, path: Path) -> None:
@@ -300,4 +300,4 @@ def robustness(rows: list[dict], summary: dict, path: Path) -> None:
         ax.legend(fontsize=8)
     axes[0].set_title("Robustness to the Chamfer weights", loc="left")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)

@@ -70,7 +70,7 @@ def polish(chamfer, X: np.ndarray, step: np.ndarray = DEFAULT_STEP,
 DEFAULT_FD_STEP = np.array([0.01, 0.01, 0.01, 0.1, 0.1, 0.1])   # m, m, m, deg, deg, deg
 
 
-def _fd_stencil(h: np.ndarray) -> np.ndarray:
+def fd_stencil(h: np.ndarray) -> np.ndarray:
     """Offsets (28, 6) for a finite-difference gradient and Hessian: centre, +-h_i, h_i + h_j."""
     e = np.eye(6) * h
     pairs = [e[i] + e[j] for i in range(6) for j in range(i + 1, 6)]
@@ -97,7 +97,7 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
         Hessian per metre / degree squared.
     """
     k = len(X)
-    S = _fd_stencil(h)
+    S = fd_stencil(h)
     cand = np.repeat(X[:, None, :], len(S), axis=1)
     cand[:, :, :6] += S[None]
     v = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(k, len(S))
@@ -105,7 +105,7 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
 
 
 def stencil_derivatives(v: np.ndarray, h: np.ndarray):
-    """Value, gradient and Hessian from objective values on :func:`_fd_stencil`.
+    """Value, gradient and Hessian from objective values on :func:`fd_stencil`.
 
     Parameters
     ----------
