@@ -245,3 +245,29 @@ class TestLensModels:
         uv, z, vis = project(pts, cam, np.eye(4))
         assert z.tolist() == [5.0, -5.0, 1.0] and vis.tolist() == [True, False, False]
         np.testing.assert_allclose(uv[0], [640.0, 352.0])
+
+
+@pytest.mark.parametrize("make", [
+    lambda: Camera(AIM_PIN_K, 1280, 704, "pinhole", AIM_PIN_D),
+    lambda: Camera(np.array([[300.0, 0, 319.5], [0, 310.0, 239.5], [0, 0, 1]]), 640, 480,
+                   "fisheye", [0.08, -0.03, 0.01, -0.002]),
+    _mei,
+], ids=["radtan", "fisheye", "mei"])
+def test_project_a_batch_of_extrinsics_equals_one_at_a_time(make, rng):
+    """``project`` with (C, 4, 4) extrinsics gives, per candidate, what one extrinsic gives."""
+    from paretocal.geometry import decalibrate
+
+    cam = make()
+    pts = rng.uniform([-20, -20, -3], [20, 20, 3], size=(500, 3))
+    T0 = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])  # x ahead
+    Ts = np.stack([decalibrate(T0, 10, 0.5, k)[0] for k in range(4)])
+    uv, z, vis = project(pts, cam, Ts)
+    assert uv.shape == (4, 500, 2) and z.shape == vis.shape == (4, 500)
+    assert vis.any(axis=1).all()
+    for c, T in enumerate(Ts):
+        uv1, z1, vis1 = project(pts, cam, T)
+        np.testing.assert_array_equal(vis[c], vis1)
+        np.testing.assert_allclose(z[c], z1, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(uv[c], uv1, rtol=0, atol=1e-9)
+    uv34, _, _ = project(pts, cam, Ts[:, :3, :])
+    np.testing.assert_array_equal(uv34, uv)

@@ -41,6 +41,7 @@ from functools import cached_property
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
+from .geometry import transform_points
 
 MODELS = ("pinhole", "fisheye", "mei")
 
@@ -508,35 +509,37 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
             z_min: float = Z_MIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Project LiDAR points into the image through the camera's model.
 
+    The one projection of LiDAR points used by the features, the objective's oracles, the
+    decision, the depth map and the figures (the numba kernels and the page's script repeat
+    its arithmetic and are tested against it).
+
     Parameters
     ----------
     points : ndarray, shape (N, 3+)
         LiDAR points in metres (columns beyond the third are ignored).
     camera : Camera
-    T_cam_lidar : ndarray, shape (4, 4)
+    T_cam_lidar : ndarray, shape (4, 4), or a batch (..., 4, 4) or (..., 3, 4)
     z_min : float
         Minimum depth (pinhole) or range (fisheye, Mei) in metres of a valid point.
 
     Returns
     -------
-    uv : ndarray, shape (N, 2)
+    uv : ndarray, shape (..., N, 2)
         Pixel coordinates (NaN where the point is not valid for the model).
-    z : ndarray, shape (N,)
+    z : ndarray, shape (..., N)
         Depth along the optical axis in metres.
-    visible : ndarray of bool, shape (N,)
+    visible : ndarray of bool, shape (..., N)
         Valid for the model and inside the image.
     """
-    p = np.asarray(points, dtype=np.float64)[:, :3]
-    T = np.asarray(T_cam_lidar, dtype=np.float64)
-    Xc = p @ T[:3, :3].T + T[:3, 3]
+    Xc = transform_points(T_cam_lidar, points)
     uv, valid = camera.project_camera_points(Xc, z_min)
     visible = valid & in_image(uv, camera.width, camera.height)
-    return uv, Xc[:, 2], visible
+    return uv, Xc[..., 2], visible
 
 
 def in_image(uv: np.ndarray, width: int, height: int, margin: float = 0.0) -> np.ndarray:
-    """Mask of pixel coordinates (N, 2) inside the image grown by ``margin`` pixels (NaN: no)."""
-    u, v = uv[:, 0], uv[:, 1]
+    """Mask of pixel coordinates (..., 2) inside the image grown by ``margin`` pixels (NaN: no)."""
+    u, v = uv[..., 0], uv[..., 1]
     with np.errstate(invalid="ignore"):
         return ((u >= -margin) & (u <= width - 1 + margin)
                 & (v >= -margin) & (v <= height - 1 + margin))

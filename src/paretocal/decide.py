@@ -103,8 +103,8 @@ def reprojection_deviation(T: np.ndarray, T_best: np.ndarray, points: list[np.nd
             continue
         P = np.asarray(pts, dtype=np.float64)[vis, :3]
         diag = float(np.hypot(cam.width, cam.height))
-        Xc = np.einsum("kij,mj->kmi", T[:, :3, :3], P) + T[:, None, :3, 3]   # (k, m, 3)
-        uv, valid = cam.project_camera_points(Xc, z_min)
+        uv, _, _ = project(P, cam, T, z_min)                                 # (k, m, 2)
+        valid = np.isfinite(uv[..., 0])
         d = np.linalg.norm(uv - uv0[vis][None], axis=-1)
         d = np.where(valid, np.minimum(d, diag), diag)
         total += d.sum(axis=1)

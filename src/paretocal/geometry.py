@@ -97,10 +97,23 @@ def invert(T: np.ndarray) -> np.ndarray:
 
 
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Apply a 4x4 transform to points of shape (N, 3) (extra columns ignored); returns (N, 3)."""
+    """Apply rigid transforms to points: the one place a point changes frame.
+
+    Parameters
+    ----------
+    T : ndarray, shape (..., 4, 4) or (..., 3, 4)
+        One transform or a batch of them.
+    points : ndarray, shape (N, 3+)
+        Points in metres (columns beyond the third are ignored).
+
+    Returns
+    -------
+    ndarray, shape (..., N, 3), float64
+        The points under every transform of the batch.
+    """
     T = np.asarray(T, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)[:, :3]
-    return p @ T[:3, :3].T + T[:3, 3]
+    return p @ np.swapaxes(T[..., :3, :3], -1, -2) + T[..., None, :3, 3]
 
 
 def rotation_angle_deg(R: np.ndarray) -> np.ndarray:

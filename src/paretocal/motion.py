@@ -87,6 +87,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation, Slerp
 
+from .geometry import transform_points
+
 log = logging.getLogger(__name__)
 
 __all__ = [
@@ -149,10 +151,6 @@ def _matrix(R: Rotation, t: np.ndarray) -> np.ndarray:
     T[:3, :3] = R.as_matrix()
     T[:3, 3] = t
     return T
-
-
-def _apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return p @ T[:3, :3].T + T[:3, 3]
 
 
 # ----------------------------------------------------------------------------- motions
@@ -399,7 +397,7 @@ class _PairFit:
 
 def _solve_step(src: np.ndarray, tgt: _Target, T: np.ndarray, gate: float):
     """One Gauss-Newton step of robust point-to-plane ICP (left perturbation, translation first)."""
-    p = _apply(T, src)
+    p = transform_points(T, src)
     d, j = tgt.tree.query(p, k=1, distance_upper_bound=gate)
     ok = np.isfinite(d)
     if ok.sum() < 6:
@@ -479,7 +477,7 @@ def _coarse_translation(src: np.ndarray, tgt: _Target, T0: np.ndarray, radius: f
         a = np.cross(up, [0.0, 1.0, 0.0])
     a /= np.linalg.norm(a)
     b = np.cross(up, a)
-    p = _apply(T0, src)
+    p = transform_points(T0, src)
 
     def best(centre: np.ndarray, half: float, h: float) -> np.ndarray:
         n = int(math.ceil(half / h))
@@ -705,7 +703,7 @@ def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]], ref_times: S
         pts = deskew(xyz, t, ref_times[k], motions[k])
         if k > 0:
             pick = rng.choice(len(pts), size=min(sample, len(pts)), replace=False)
-            d, _ = prev.query(_apply(pair_poses[k - 1], pts[pick]), k=1)
+            d, _ = prev.query(transform_points(pair_poses[k - 1], pts[pick]), k=1)
             out[k - 1] = float(np.median(d))
         if k < len(clouds) - 1:
             prev = _tree(pts)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .features.rings import azimuth, fit_ring_lines, ring_order, rings_from_scan_order
-from .geometry import rotation_zyx
+from .geometry import rotation_zyx, transform_points
 
 #: Azimuth width of one firing column (deg) in :func:`firing_order`: an HDL-64E at 10 Hz.
 COLUMN_DEG = 0.17
@@ -94,7 +94,7 @@ def to_vehicle_frame(v: Variant, pose: np.ndarray | None = None) -> Variant:
     """The same sweep expressed in a vehicle frame where the sensor sits at ``pose``."""
     P = vehicle_pose() if pose is None else np.asarray(pose, dtype=np.float64)
     pts = v.points.astype(np.float64)
-    xyz = pts[:, :3] @ P[:3, :3].T + P[:3, 3]
+    xyz = transform_points(P, pts)
     out = np.column_stack([xyz, pts[:, 3]]).astype(np.float32)
     return Variant(out, v.ring.copy(), v.time.copy(), P @ v.sensor_pose)
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..camera import Camera, in_image, project
 from ..config import FeatureSettings, ObjectiveSettings
-from ..geometry import invert
+from ..geometry import invert, transform_points
 from ..io.frame import Frame
 from .image import ImageFeatures, image_features
 from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
@@ -104,9 +104,8 @@ def sensor_points(frame: Frame) -> np.ndarray:
     pts = np.asarray(frame.points, dtype=np.float64)
     if frame.sensor_pose is None:
         return pts
-    inv = invert(frame.sensor_pose)
     out = pts.copy()
-    out[:, :3] = pts[:, :3] @ inv[:3, :3].T + inv[:3, 3]
+    out[:, :3] = transform_points(invert(frame.sensor_pose), pts)
     return out
 
 
@@ -160,8 +159,7 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
         edge_contour=features.edge_contour, rng=rng)
     xyz_all = lf.xyz
     if frame.sensor_pose is not None:
-        P = np.asarray(frame.sensor_pose, dtype=np.float64)
-        xyz_all = xyz_all @ P[:3, :3].T + P[:3, 3]
+        xyz_all = transform_points(frame.sensor_pose, xyz_all)
     keep = _wanted_groups(lf.group, objective)
     uv, z, _ = project(xyz_all, frame.camera, T_init, features.z_min)
     keep &= (z > features.z_min) & in_image(uv, frame.camera.width, frame.camera.height,

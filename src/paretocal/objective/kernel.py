@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import (FISHEYE, MEI, P_CX, P_CY, P_FX, P_FY, P_K1, P_LIMIT, P_MODEL, P_P1, P_P2,
-                      P_S1, P_SKEW, P_XI, P_ZS_MIN, PINHOLE_IDEAL)
+                      P_S1, P_SKEW, P_XI, P_ZS_MIN, PINHOLE_IDEAL, project)
 from .scene import DT_MASKED, N_GROUPS, Scene
 
 try:  # numba is a hard dependency, but keep the numpy path usable if it fails to import
@@ -415,8 +415,8 @@ def sums_kdtree(scene: Scene, edge_uv: list[np.ndarray], T: np.ndarray, n: np.nd
         w, h = int(scene.width[f]), int(scene.height[f])
         for c in range(C):
             m = min(int(n[c]), b - a)
-            uv, valid = cam.project_camera_points(P[:m] @ R[c, :, :3].T + R[c, :, 3],
-                                                  scene.z_min)
+            uv, _, _ = project(P[:m], cam, R[c], scene.z_min)
+            valid = np.isfinite(uv[:, 0])
             with np.errstate(invalid="ignore"):
                 ok = (valid & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1)
                       & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1))

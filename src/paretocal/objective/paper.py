@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..camera import project
 from .scene import Scene
 
 NO_POINT_COST = 1e12  # no point in front of the camera: nothing to measure against
@@ -43,8 +44,8 @@ def paper_chamfer(scene: Scene, edge_uv: list[np.ndarray], T: np.ndarray,
         cam = scene.cameras[f]
         for c in range(C):
             m = min(int(n[c]), b - a)
-            uv, valid = cam.project_camera_points(P[:m] @ T[c, :3, :3].T + T[c, :3, 3],
-                                                  scene.z_min)
+            uv, _, _ = project(P[:m], cam, T[c], scene.z_min)
+            valid = np.isfinite(uv[:, 0])
             if not valid.any() or len(edge_uv[f]) == 0:
                 out[c, f] = NO_POINT_COST
                 continue
