@@ -142,7 +142,11 @@ def optimiser_overhead(quick=False):
     from pymoo.operators.mutation.pm import PM
 
     from paretocal.config import SearchSettings
-    from paretocal.search import nsga
+    from paretocal.search import run_nsga2
+    from paretocal.search.problem import RoundN
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from pymoo_nsga import make_algorithm, run_pymoo_nsga2
 
     class Toy:
         def evaluate(self, X):
@@ -150,31 +154,28 @@ def optimiser_overhead(quick=False):
             return np.column_stack([d + 5.0 / np.sqrt(X[:, 6]), X[:, 6]])
 
     gens = 10 if quick else 30
-    rows = []
-    make = nsga.make_algorithm
+    s = SearchSettings(pop=1000, gens=gens, seed=0)
     variants = [
-        ("pymoo NSGA2 as the paper ran it (duplicate elimination)", "pymoo",
-         lambda s, seeds=None: NSGA2(pop_size=s.pop, crossover=SBX(prob=0.9, eta=15),
-                                     mutation=PM(eta=20), repair=nsga.RoundN(),
-                                     eliminate_duplicates=True)),
-        ("pymoo NSGA2, duplicates off", "pymoo",
-         lambda s, seeds=None: NSGA2(pop_size=s.pop, crossover=SBX(prob=0.9, eta=15),
-                                     mutation=PM(eta=20, at_least_once=True),
-                                     repair=nsga.RoundN(), eliminate_duplicates=False)),
-        ("pymoo NSGA2 tuned (engine 'pymoo')", "pymoo", make),
-        ("array engine (engine 'lean', default)", "lean", make),
+        ("pymoo NSGA2 as the paper ran it (duplicate elimination)",
+         lambda: run_pymoo_nsga2(Toy(), s, 20, 2000, NSGA2(
+             pop_size=s.pop, crossover=SBX(prob=0.9, eta=15), mutation=PM(eta=20),
+             repair=RoundN(), eliminate_duplicates=True))),
+        ("pymoo NSGA2, duplicates off",
+         lambda: run_pymoo_nsga2(Toy(), s, 20, 2000, NSGA2(
+             pop_size=s.pop, crossover=SBX(prob=0.9, eta=15),
+             mutation=PM(eta=20, at_least_once=True), repair=RoundN(),
+             eliminate_duplicates=False))),
+        ("pymoo NSGA2 tuned (benchmarks/pymoo_nsga.py)",
+         lambda: run_pymoo_nsga2(Toy(), s, 20, 2000, make_algorithm(s))),
+        ("array engine (the package's)", lambda: run_nsga2(Toy(), s, 20, 2000)),
     ]
     print("\n2a. NSGA-II's own time per generation, population 1000 (objective excluded)")
-    try:
-        for label, engine, factory in variants:
-            nsga.make_algorithm = factory
-            s = SearchSettings(pop=1000, gens=gens, seed=0, engine=engine)
-            r = nsga.run_nsga2(Toy(), s, 20, 2000)
-            ms = 1e3 * (r.wall_s - r.objective_s) / gens
-            rows.append((label, ms))
-            print(f"   {label:<58} {ms:7.1f} ms")
-    finally:
-        nsga.make_algorithm = make
+    rows = []
+    for label, run in variants:
+        r = run()
+        ms = 1e3 * (r.wall_s - r.objective_s) / gens
+        rows.append((label, ms))
+        print(f"   {label:<58} {ms:7.1f} ms")
     return dict(rows)
 
 

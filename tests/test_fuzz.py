@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from paretocal.camera import Camera, project
 from paretocal.config import Settings, load_settings
-from paretocal.errors import InputError, ParetocalError
+from paretocal.errors import InputError, ParetocalError, SettingsError
 from paretocal.geometry import (apply_correction, correction_matrix, correction_params, invert,
                                 pose_error, rotation_angle_deg, transform_points)
 from paretocal.io import detect_source, read_extrinsic
@@ -506,6 +506,20 @@ def test_null_turns_the_seed_grid_off(work):
     # The command line's "not given" stays "keep the current value".
     assert s.replace(search={"seed_grid_deg": None}).search.seed_grid_deg is None
     assert Settings().replace(search={"seed_grid_deg": None}).search.seed_grid_deg == 2.5
+
+
+def test_retired_settings_load_only_with_their_one_meaning(work):
+    """Files written before ``search.eliminate_duplicates`` was retired still load when it says
+    what the code does (false); ``true`` is refused naming the key, as is the retired engine."""
+    p = work / "old.yaml"
+    p.write_text("search:\n  engine: lean\n  eliminate_duplicates: false\n  pop: 40\n")
+    assert load_settings(p).search.pop == 40
+    p.write_text("search:\n  eliminate_duplicates: true\n")
+    with pytest.raises(SettingsError, match="eliminate_duplicates"):
+        load_settings(p)
+    p.write_text("search:\n  engine: pymoo\n")
+    with pytest.raises(SettingsError, match="engine"):
+        load_settings(p)
 
 
 # --- geometry -------------------------------------------------------------------------------------

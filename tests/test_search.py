@@ -94,11 +94,27 @@ class TestNSGA2:
 
 
 class TestEngines:
-    """The array engine and pymoo's algorithm object run the same NSGA-II."""
+    """The package's array engine and pymoo's algorithm object (benchmarks/pymoo_nsga.py) run
+    the same NSGA-II."""
+
+    @staticmethod
+    def _pymoo():
+        import importlib.util
+        from pathlib import Path
+
+        path = Path(__file__).parents[1] / "benchmarks" / "pymoo_nsga.py"
+        spec = importlib.util.spec_from_file_location("pymoo_nsga", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+
+    def _settings(self, seed=3):
+        return SearchSettings(pop=60, gens=25, seed=seed, bound_t_m=3, bound_r_deg=3)
 
     def _run(self, engine, seed=3):
-        s = SearchSettings(pop=60, gens=25, seed=seed, bound_t_m=3, bound_r_deg=3,
-                           engine=engine)
+        s = self._settings(seed)
+        if engine == "pymoo":
+            return self._pymoo().run_pymoo_nsga2(TestNSGA2.Toy(), s, 10, 1000)
         return run_nsga2(TestNSGA2.Toy(), s, 10, 1000)
 
     def test_both_converge_to_the_same_front(self):

@@ -84,7 +84,7 @@ class SearchSettings:
 
     pop: int = 300
     gens: int = 120
-    engine: str = "lean"             #: "lean" (arrays + pymoo operators) or "pymoo" (its NSGA2)
+    engine: str = "lean"             #: "lean": NSGA-II on arrays with pymoo's operators (the only one)
     seed: int = 0
     #: How far off the initial extrinsic may be, per axis (deg, m): sets the search box.
     init_error_deg: float = 10.0
@@ -96,7 +96,6 @@ class SearchSettings:
     sbx_prob: float = 0.9
     sbx_eta: float = 15.0
     pm_eta: float = 20.0
-    eliminate_duplicates: bool = False
     include_init: bool = True        #: seed the population with the zero correction
     seed_grid_deg: float | None = 2.5  #: rotation grid step for seeding (None: no grid)
     seed_truncation_px: float = 30.0  #: coarse objective's DT truncation for the grid
@@ -300,7 +299,7 @@ def _check_features(f: FeatureSettings) -> None:
 #: The allowed values of every setting that takes a word, by (section, name): the one list the
 #: validation, the command line's choices and the documentation read.
 CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
-    ("search", "engine"): ("lean", "pymoo"),
+    ("search", "engine"): ("lean",),
     ("objective", "chamfer"): ("edge-dt", "paper"),
     ("objective", "outside"): ("mean", "truncation"),
     ("objective", "cost"): ("model", "psutil"),
@@ -385,11 +384,31 @@ def load_settings(path: str | Path | None, base: Settings | None = None) -> Sett
     return settings_from_mapping(read_mapping(Path(path)), str(path), base)
 
 
+#: Settings that no longer exist, with the one value that still means what the code does: files
+#: written before their removal load; any other value is refused, naming the key.
+RETIRED = {("search", "eliminate_duplicates"): False}
+
+
+def _drop_retired(data: dict, name: str) -> dict:
+    out = dict(data)
+    for (section, key), value in RETIRED.items():
+        sec = out.get(section)
+        if isinstance(sec, dict) and key in sec:
+            if sec[key] != value:
+                raise SettingsError(f"{name}: {section}.{key}: {sec[key]!r} is no longer "
+                                    f"available (only pymoo's own NSGA-II object, which the "
+                                    f"package no longer runs, eliminated duplicates); remove "
+                                    f"the key")
+            out[section] = {k: v for k, v in sec.items() if k != key}
+    return out
+
+
 def settings_from_mapping(data: dict, name: str = "settings",
                           base: Settings | None = None) -> Settings:
     """Settings from a mapping laid out by section (as :meth:`Settings.to_dict` writes it),
     over ``base``; errors name ``name`` (the file it came from)."""
     settings = base or Settings()
+    data = _drop_retired(data, name)
     top = {f.name for f in fields(Settings)}
     unknown = sorted(map(str, set(data) - top))
     if unknown:

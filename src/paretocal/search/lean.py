@@ -26,6 +26,22 @@ from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 from pymoo.util.randomized_argsort import randomized_argsort
 
 
+def tournament_winners(F: np.ndarray, crowding: np.ndarray, a: np.ndarray, b: np.ndarray,
+                       coin: np.ndarray) -> np.ndarray:
+    """NSGA-II's binary tournament between individuals ``a`` and ``b`` (index arrays, (n,)).
+
+    pymoo's ``comp_by_dom_and_crowding`` rule for unconstrained problems, vectorised: the
+    dominating individual wins; otherwise the larger crowding distance; otherwise ``coin``
+    ((n,) bool, True: ``a``). ``F`` (P, 2) objectives, ``crowding`` (P,). Returns (n,) indices.
+    """
+    Fa, Fb = F[a], F[b]
+    a_dom = np.all(Fa <= Fb, axis=1) & np.any(Fa < Fb, axis=1)
+    b_dom = np.all(Fb <= Fa, axis=1) & np.any(Fb < Fa, axis=1)
+    ca, cb = crowding[a], crowding[b]
+    by_cd = np.where(ca > cb, a, np.where(cb > ca, b, np.where(coin, a, b)))
+    return np.where(a_dom, a, np.where(b_dom, b, by_cd))
+
+
 @dataclass
 class LeanState:
     """Everything a run needs to continue: population, objectives, ranks, crowding, RNG."""
@@ -106,13 +122,7 @@ class LeanNSGA2:
         m = len(s.X)
         perms = np.concatenate([rng.permutation(m) for _ in range(math.ceil(2 * n / m))])
         a, b = perms[: 2 * n].reshape(n, 2).T
-        Fa, Fb = s.F[a], s.F[b]
-        a_dom = np.all(Fa <= Fb, axis=1) & np.any(Fa < Fb, axis=1)
-        b_dom = np.all(Fb <= Fa, axis=1) & np.any(Fb < Fa, axis=1)
-        coin = rng.random(n) < 0.5
-        ca, cb = s.crowding[a], s.crowding[b]
-        by_cd = np.where(ca > cb, a, np.where(cb > ca, b, np.where(coin, a, b)))
-        return np.where(a_dom, a, np.where(b_dom, b, by_cd))
+        return tournament_winners(s.F, s.crowding, a, b, rng.random(n) < 0.5)
 
     def _survive(self, F: np.ndarray, n_survive: int, rng: np.random.Generator):
         """pymoo's rank-and-crowding survival on arrays: returns (rank, crowding, kept idx)."""

@@ -1,4 +1,10 @@
-"""NSGA-II with the paper's operators, run generation by generation."""
+"""NSGA-II with the paper's operators, run generation by generation.
+
+One engine: :class:`~paretocal.search.lean.LeanNSGA2` (pymoo's operators, sorting and crowding on
+plain arrays). pymoo's own algorithm object runs the same NSGA-II about three times slower per
+generation; it is kept in ``benchmarks/pymoo_nsga.py``, where the speed benchmark and a test
+compare the two.
+"""
 
 from __future__ import annotations
 
@@ -7,18 +13,12 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from pymoo.algorithms.moo.nsga2 import NSGA2
-from pymoo.operators.crossover.sbx import SBX
-from pymoo.operators.mutation.pm import PM
-from pymoo.operators.sampling.rnd import FloatRandomSampling
-from pymoo.operators.selection.tournament import TournamentSelection
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
 from ..config import SearchSettings
-from ..errors import SettingsError
 from .checkpoint import Checkpoint, SearchInterrupted
 from .lean import LeanNSGA2
-from .problem import CalibrationProblem, RoundN, SamplingWithInit, bounds, place_seeds
+from .problem import bounds, place_seeds, round_n
 
 log = logging.getLogger(__name__)
 
@@ -53,48 +53,6 @@ class SearchResult:
     wall_s: float
     objective_s: float
     history: list = field(default_factory=list)
-
-
-def binary_tournament(pop, P, algorithm, **kwargs):
-    """NSGA-II's binary tournament, vectorised (pymoo's loops over pairs in Python).
-
-    Same rule as pymoo's ``comp_by_dom_and_crowding`` for unconstrained problems: the dominating
-    individual wins; otherwise the larger crowding distance; otherwise a coin toss.
-    """
-    F = pop.get("F")
-    cd = pop.get("crowding")
-    a, b = P[:, 0], P[:, 1]
-    Fa, Fb = F[a], F[b]
-    a_dom = np.all(Fa <= Fb, axis=1) & np.any(Fa < Fb, axis=1)
-    b_dom = np.all(Fb <= Fa, axis=1) & np.any(Fb < Fa, axis=1)
-    coin = algorithm.random_state.random(len(a)) < 0.5
-    by_cd = np.where(cd[a] > cd[b], a, np.where(cd[b] > cd[a], b, np.where(coin, a, b)))
-    S = np.where(a_dom, a, np.where(b_dom, b, by_cd))
-    return S[:, None].astype(int, copy=False)
-
-
-class FastPymooNSGA2(NSGA2):
-    """pymoo's NSGA-II (``engine = "pymoo"``) without work a fixed-generation run does not need.
-
-    The non-dominated optimum is not recomputed after every generation (the front is taken
-    from the final population), and the tournament is vectorised: 51 -> 38 ms per generation
-    at population 1000. The default ``lean`` engine (:mod:`paretocal.search.lean`) runs the
-    same operators on arrays in about 12 ms.
-    """
-
-    def _set_optimum(self, **kwargs):
-        self.opt = self.pop
-
-
-def make_algorithm(settings: SearchSettings, seeds: np.ndarray | None = None) -> NSGA2:
-    """NSGA-II with SBX (p, eta), polynomial mutation (eta) and uniform sampling (plus the
-    zero correction and ``seeds`` (k, 6) when ``settings.include_init``)."""
-    sampling = SamplingWithInit(seeds) if settings.include_init else FloatRandomSampling()
-    return FastPymooNSGA2(pop_size=settings.pop, sampling=sampling,
-                          selection=TournamentSelection(func_comp=binary_tournament),
-                          crossover=SBX(prob=settings.sbx_prob, eta=settings.sbx_eta),
-                          mutation=PM(eta=settings.pm_eta, at_least_once=True),
-                          repair=RoundN(), eliminate_duplicates=settings.eliminate_duplicates)
 
 
 class _TimedObjective:
@@ -146,7 +104,7 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
         Poses placed in the initial population.
     checkpoint : Checkpoint, optional
         Save the state every ``checkpoint.every`` generations and resume from it when it
-        exists (``engine = "lean"`` only). On KeyboardInterrupt (SIGINT, or SIGTERM turned
+        exists. On KeyboardInterrupt (SIGINT, or SIGTERM turned
         into one) the state of the last completed generation is saved and
         :class:`SearchInterrupted` is raised with its non-dominated set.
     """
@@ -161,52 +119,33 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
             progress(gen, settings.gens, best)
 
     t0 = time.perf_counter()
-    if checkpoint is not None and settings.engine != "lean":
-        raise SettingsError("checkpoints need the array engine (search.engine: lean)")
-    if settings.engine == "lean":
-        engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, _round_n(xl, xu),
-                           settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
-        saved = checkpoint.load() if checkpoint is not None else None
-        if saved is not None:
-            state, history[:] = saved
-            timed.evaluations = state.evaluations
-            log.info("resuming the search at generation %d", state.generation)
-        else:
-            rng = np.random.default_rng(settings.seed)
-            X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
-            if settings.include_init:
-                X0 = place_seeds(X0, xl, xu, np.vstack([np.zeros((1, 6))] + (
-                    [seeds] if seeds is not None and len(seeds) else [])))
-            state = engine.start(X0, settings.seed)
-            record(1, state.F)
-        try:
-            while state.generation < settings.gens:
-                # step() leaves its argument untouched, so an interrupt inside it leaves the
-                # last whole generation in `state` to save.
-                state = engine.step(state)
-                record(state.generation, state.F)
-                if checkpoint is not None and state.generation % checkpoint.every == 0:
-                    checkpoint.save(state, history)
-        except KeyboardInterrupt:
-            if checkpoint is not None:
-                checkpoint.save(state, history)
-            Xf, Ff = front_of(state.X, state.F)
-            raise SearchInterrupted(Xf, Ff, state.generation,
-                                    checkpoint.path if checkpoint is not None else None) from None
-        if checkpoint is not None:
-            checkpoint.save(state, history)     # a resume after this point skips the search
-        popX, popF, gen = state.X, state.F, state.generation
+    engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, lambda X: round_n(X, xl, xu),
+                       settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
+    saved = checkpoint.load() if checkpoint is not None else None
+    if saved is not None:
+        state, history[:] = saved
+        timed.evaluations = state.evaluations
+        log.info("resuming the search at generation %d", state.generation)
     else:
-        problem = CalibrationProblem(timed, xl, xu)
-        algorithm = make_algorithm(settings, seeds)
-        algorithm.setup(problem, termination=("n_gen", settings.gens), seed=settings.seed,
-                        verbose=False, save_history=False)
-        gen = 0
-        while algorithm.has_next():
-            algorithm.next()
-            gen += 1
-            record(gen, algorithm.pop.get("F"))
-        popX, popF = algorithm.pop.get("X"), algorithm.pop.get("F")
+        state = engine.start(initial_population(settings, xl, xu, seeds), settings.seed)
+        record(1, state.F)
+    try:
+        while state.generation < settings.gens:
+            # step() leaves its argument untouched, so an interrupt inside it leaves the last
+            # whole generation in `state` to save.
+            state = engine.step(state)
+            record(state.generation, state.F)
+            if checkpoint is not None and state.generation % checkpoint.every == 0:
+                checkpoint.save(state, history)
+    except KeyboardInterrupt:
+        if checkpoint is not None:
+            checkpoint.save(state, history)
+        Xf, Ff = front_of(state.X, state.F)
+        raise SearchInterrupted(Xf, Ff, state.generation,
+                                checkpoint.path if checkpoint is not None else None) from None
+    if checkpoint is not None:
+        checkpoint.save(state, history)     # a resume after this point skips the search
+    popX, popF, gen = state.X, state.F, state.generation
     wall = time.perf_counter() - t0
     Xf, Ff = front_of(popX, popF)
     return SearchResult(X=Xf, F=Ff, pop_X=popX, pop_F=popF, evaluations=timed.evaluations,
@@ -214,9 +153,13 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
                         objective_s=timed.seconds, history=history)
 
 
-def _round_n(xl: np.ndarray, xu: np.ndarray):
-    """The array form of :class:`RoundN`."""
-    def repair(X):
-        X[:, 6] = np.clip(np.rint(X[:, 6]), xl[6], xu[6])
-        return X
-    return repair
+def initial_population(settings: SearchSettings, xl: np.ndarray, xu: np.ndarray,
+                       seeds: np.ndarray | None = None) -> np.ndarray:
+    """The first generation (pop, 7): uniform in the box from ``settings.seed`` (the paper's
+    sampling), plus the zero correction and ``seeds`` (k, 6) when ``settings.include_init``."""
+    rng = np.random.default_rng(settings.seed)
+    X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
+    if settings.include_init:
+        X0 = place_seeds(X0, xl, xu, np.vstack([np.zeros((1, 6))] + (
+            [seeds] if seeds is not None and len(seeds) else [])))
+    return X0

@@ -1,9 +1,9 @@
-"""The calibration as a pymoo problem over ``[x, y, z, yaw, pitch, roll, n]``."""
+"""The search space ``[x, y, z, yaw, pitch, roll, n]``: bounds, the integer repair of ``n``, and
+the initial population with the given poses."""
 
 from __future__ import annotations
 
 import numpy as np
-from pymoo.core.problem import Problem
 from pymoo.core.repair import Repair
 from pymoo.core.sampling import Sampling
 from pymoo.operators.sampling.rnd import FloatRandomSampling
@@ -22,26 +22,18 @@ def bounds(settings: SearchSettings, n_min: int, n_max: int) -> tuple[np.ndarray
     return xl, xu
 
 
-class CalibrationProblem(Problem):
-    """Two objectives, both minimised, evaluated for the whole population in one call.
-
-    ``objective`` is any object with ``evaluate(X) -> F`` (shape (C, 2)).
-    """
-
-    def __init__(self, objective, xl: np.ndarray, xu: np.ndarray):
-        super().__init__(n_var=7, n_obj=2, xl=xl, xu=xu)
-        self.objective = objective
-
-    def _evaluate(self, X, out, *args, **kwargs):
-        out["F"] = self.objective.evaluate(X)
+def round_n(X: np.ndarray, xl: np.ndarray, xu: np.ndarray) -> np.ndarray:
+    """Round the point count (last column of X (C, 7)) to an integer within its bounds, in
+    place; the pose stays continuous. Returns X."""
+    X[:, 6] = np.clip(np.rint(X[:, 6]), xl[6], xu[6])
+    return X
 
 
 class RoundN(Repair):
-    """Round the point count (last column) to an integer; the pose stays continuous."""
+    """:func:`round_n` as a pymoo repair (for pymoo's own algorithms: the study's GA)."""
 
     def _do(self, problem, X, **kwargs):
-        X[:, 6] = np.clip(np.rint(X[:, 6]), problem.xl[6], problem.xu[6])
-        return X
+        return round_n(X, problem.xl, problem.xu)
 
 
 class SamplingWithInit(Sampling):
