@@ -193,7 +193,7 @@ def _child(case: str, frames_spec: str) -> dict:
     t0 = time.perf_counter()
     if case == "search":
         scene, _ = _scene(frames, settings)
-        lo, hi = n_range(settings, scene.points_per_frame)
+        lo, hi = n_range(settings.search, scene.points_per_frame)
         cm = measure_cost_model(scene, sums_numba, T_init, lo, hi)
         obj = CalibrationObjective(scene, T_init, settings.objective, cm, ucb_k=settings.ucb_k)
         r = run_nsga2(obj, settings.search, lo, hi)

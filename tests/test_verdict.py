@@ -32,7 +32,8 @@ def test_a_restart_finds_the_truth_when_the_result_is_a_wrong_pose(stage):
     pose, and a search from a random population over the box finds a pose that fits the
     frames better, far from it."""
     wrong = _full(stage, [0.0, 0.0, 0.0, 6.0, 0.0, 0.0])
-    ev = restart_evidence(stage.objective, SETTINGS, stage.n_min, stage.n_max, wrong, wrong)
+    ev = restart_evidence(stage.objective, SETTINGS.search, SETTINGS.decision, stage.n_min,
+                          stage.n_max, wrong, wrong)
     (run,) = ev["runs"]
     assert ev["disagrees"] and run["distinct"] and run["mean_px"] > 0, run
     assert run["separation_deg"] > 3.0
@@ -41,7 +42,8 @@ def test_a_restart_finds_the_truth_when_the_result_is_a_wrong_pose(stage):
 
 def test_a_restart_agrees_with_the_reference(stage):
     truth = _full(stage, np.zeros(6))
-    ev = restart_evidence(stage.objective, SETTINGS, stage.n_min, stage.n_max, truth)
+    ev = restart_evidence(stage.objective, SETTINGS.search, SETTINGS.decision, stage.n_min,
+                          stage.n_max, truth)
     (run,) = ev["runs"]
     assert not ev["disagrees"], run
     assert run["separation_deg"] < 1.0 and run["separation_cm"] < 10.0
@@ -75,7 +77,7 @@ def test_images_of_other_frames_do_not_agree_with_the_clouds(raw_frames):
     for name, fr in cases.items():
         st = Stage(fr, T, T, SETTINGS)
         x = local_optimum(st.objective, _full(st, np.zeros(6)))
-        out[name] = contrast_evidence(st.objective, SETTINGS, x, rng=3)
+        out[name] = contrast_evidence(st.objective, SETTINGS.search, x, rng=3)
     assert out["right"]["z"] > CONTRAST_MIN_Z + 1.0 and out["right"]["frames_clear"] == 1.0, out
     assert out["swapped"]["z"] < CONTRAST_MIN_Z and out["upside down"]["z"] < CONTRAST_MIN_Z, out
     assert out["right"]["margin_px"] > 1.5 * out["swapped"]["margin_px"]
@@ -97,7 +99,7 @@ def test_resolution_is_the_step_that_moves_points_one_pixel(stage):
 def test_intervals_combine_jackknife_and_resolution():
     se = {"x": 3.0, "y": 4.0, "z": float("nan"), "yaw": 0.1, "pitch": 50.0, "roll": 0.0}
     res = np.array([0.04, 0.0, 0.01, 0.0, 0.1, 0.2])        # m and deg per pixel
-    iv = intervals({"jackknife_se": se}, res, Settings())
+    iv = intervals({"jackknife_se": se}, res, Settings().search)
     h = iv["half_width"]
     k = RESOLUTION_PX
     assert h["x"] == pytest.approx(Z95 * np.hypot(3.0, k * 4.0), rel=1e-4)   # cm

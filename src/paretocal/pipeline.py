@@ -151,7 +151,8 @@ def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Set
     seeds = None
     if settings.search.seed_grid_deg:
         with _timed(timings, "seed_grid"):
-            seeds = coarse_seeds(stage.feats, T_init, settings, stage.cost, stage.n_max)
+            seeds = coarse_seeds(stage.feats, T_init, settings.search, settings.objective,
+                                 settings.features.z_min, stage.cost, stage.n_max)
     if checkpoint is not None:
         checkpoint.key = fingerprint(
             settings.to_dict(), T_init, stage.n_min, stage.n_max,
@@ -175,11 +176,12 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
     tick = (lambda k: progress("polish", k, steps)) if progress is not None else (lambda k: None)
     tick(0)
     with _timed(timings, "polish"):
-        X, F, ev = polish_front(stage.objective, X, F, settings, stage.n_min, stage.n_max)
+        X, F, ev = polish_front(stage.objective, X, F, settings.search, stage.n_min,
+                                stage.n_max, settings.decision.refine_iters)
         # A pose far from the start replaces the start's own basin only when the frames
         # clearly prefer it (search.basin).
-        X, F, basin, ev2 = prefer_near(stage.objective, X, F, settings, stage.n_min,
-                                       stage.n_max)
+        X, F, basin, ev2 = prefer_near(stage.objective, X, F, settings.search, stage.n_min,
+                                       stage.n_max, settings.decision.refine_iters)
     evaluations += ev + ev2
     tick(1)
     if settings.features.reselect:
@@ -192,7 +194,8 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective
-            X, F, ev = polish_front(obj, X, obj.evaluate(X), settings, stage.n_min, stage.n_max)
+            X, F, ev = polish_front(obj, X, obj.evaluate(X), settings.search, stage.n_min,
+                                     stage.n_max, settings.decision.refine_iters)
         evaluations += ev + len(X)
         tick(2)
     return stage, X, F, basin, evaluations
@@ -215,7 +218,7 @@ def front_columns(stage: Stage, X: np.ndarray, F: np.ndarray, T_init: np.ndarray
     for g, name in enumerate(GROUP_NAMES):
         columns[short[name]] = parts["mean"][:, g]
     if stage.holdout is not None:
-        columns["chamfer_holdout"] = holdout_score(stage.holdout, T_init, settings, X)
+        columns["chamfer_holdout"] = holdout_score(stage.holdout, T_init, settings.objective, X)
     # How far each solution's calibration moves projections from the best-supported one.
     best = int(np.argmin(F[:, 0]))
     check = stage.holdout if stage.holdout is not None else stage.scene

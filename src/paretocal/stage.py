@@ -7,7 +7,7 @@ import logging
 
 import numpy as np
 
-from .config import Settings
+from .config import ObjectiveSettings, SearchSettings, Settings
 from .errors import DegenerateSceneError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
@@ -145,7 +145,7 @@ class Stage:
         self.scene = build_scene(self.feats, z_min, o.outside)
         self.holdout = (build_scene([p[1] for p in parts], z_min, o.outside)
                         if o.holdout > 0 else None)
-        self.n_min, self.n_max = n_range(settings, self.scene.points_per_frame)
+        self.n_min, self.n_max = n_range(settings.search, self.scene.points_per_frame)
         self.cost = measure_cost_model(self.scene, get_evaluator(o.evaluator), T_view,
                                        self.n_min, self.n_max)
         self.objective = CalibrationObjective(self.scene, T_init, o, self.cost,
@@ -153,10 +153,10 @@ class Stage:
                                               ucb_k=settings.ucb_k)
 
 
-def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]:
+def n_range(search: SearchSettings, points_per_frame: np.ndarray) -> tuple[int, int]:
     """The search's range of points per frame, validated against what the frames hold."""
     most = int(points_per_frame.max())
-    s = settings.search
+    s = search
     n_max = most if s.n_max is None else int(s.n_max)
     n_min = min(DEFAULT_N_MIN, n_max) if s.n_min is None else int(s.n_min)
     if n_max > most:
@@ -167,10 +167,11 @@ def n_range(settings: Settings, points_per_frame: np.ndarray) -> tuple[int, int]
     return n_min, n_max
 
 
-def holdout_score(scene, T_init: np.ndarray, settings: Settings, X: np.ndarray) -> np.ndarray:
+def holdout_score(scene, T_init: np.ndarray, objective: ObjectiveSettings,
+                  X: np.ndarray) -> np.ndarray:
     """Each solution's pose scored on every held-out point (no sampling-error term), shape (k,)."""
     dummy = CostModel(0.0, 1.0, 0.0, 1.0, 0, 1, {})
-    obj = CalibrationObjective(scene, T_init, settings.objective, dummy, ucb_k=0.0)
+    obj = CalibrationObjective(scene, T_init, objective, dummy, ucb_k=0.0)
     Xa = np.array(X, dtype=np.float64, copy=True)
     Xa[:, 6] = int(scene.points_per_frame.max())
     return obj.chamfer(Xa)["f1"]

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .config import DecisionSettings, SearchSettings
 from .features.lidar import GROUP_NAMES
 from .features.rings import MIN_PURITY
 from .geometry import pose_error
@@ -85,17 +86,19 @@ Z95 = 1.959964
 RESOLUTION_PX = 2.5
 
 
-def restart_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                     x_opt: np.ndarray | None = None) -> dict:
+def restart_evidence(objective, search: SearchSettings, decision: DecisionSettings, n_min: int,
+                     n_max: int, x: np.ndarray, x_opt: np.ndarray | None = None) -> dict:
     """An independent restart and how it compares with the result.
 
     Parameters
     ----------
     objective : CalibrationObjective
-    settings : Settings
-        ``decision.restarts`` searches with ``decision.restart_share`` of the main search's
-        evaluations each (population and generations scaled by its square root), seeds
-        ``search.seed + 1, + 2, ...``; no initial extrinsic or seed grid in their populations.
+    search : SearchSettings
+        The main search's settings.
+    decision : DecisionSettings
+        ``restarts`` searches with ``restart_share`` of the main search's evaluations each
+        (population and generations scaled by its square root), seeds ``search.seed + 1, + 2,
+        ...``; no initial extrinsic or seed grid in their populations.
     n_min, n_max : int
     x : ndarray, shape (7,)
         The result's correction.
@@ -113,8 +116,7 @@ def restart_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     """
     from .search import run_nsga2
 
-    d = settings.decision
-    s = settings.search
+    d, s = decision, search
     x_opt = local_optimum(objective, x) if x_opt is None else x_opt
     T0 = objective.transforms(x_opt[None])[0]
     scale = math.sqrt(d.restart_share)
@@ -150,14 +152,14 @@ def restart_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
             "evaluations": evaluations}
 
 
-def contrast_evidence(objective, settings, x_opt: np.ndarray, poses: int = CONTRAST_POSES,
+def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, poses: int = CONTRAST_POSES,
                       rng: np.random.Generator | int | None = None) -> dict:
     """How clearly the frames prefer the result over random poses about it.
 
     Parameters
     ----------
     objective : CalibrationObjective
-    settings : Settings
+    search : SearchSettings
         The random poses are uniform within ``search.init_error_deg`` / ``init_error_m`` of the
         result on every axis.
     x_opt : ndarray, shape (7,)
@@ -174,7 +176,7 @@ def contrast_evidence(objective, settings, x_opt: np.ndarray, poses: int = CONTR
         (share of (pose, frame) pairs the result beats); ``group_ratio`` (per feature group,
         the result's mean distance over the random poses' median: 1 is chance).
     """
-    s = settings.search
+    s = search
     rng = np.random.default_rng(s.seed if rng is None else rng)
     half = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
     P = np.tile(at_every_point(objective, x_opt), (poses + 1, 1))
@@ -209,7 +211,7 @@ def resolution(objective, x_opt: np.ndarray) -> np.ndarray:
     return out
 
 
-def intervals(quality: dict, res_per_px: np.ndarray, settings) -> dict:
+def intervals(quality: dict, res_per_px: np.ndarray, search: SearchSettings) -> dict:
     """Per-axis 95 % intervals of the correction (report units: cm and deg).
 
     The half-width combines the frames' disagreement (jackknife standard error) with the edge
@@ -229,7 +231,7 @@ def intervals(quality: dict, res_per_px: np.ndarray, settings) -> dict:
     se = np.array([(quality.get("jackknife_se") or {}).get(a, np.nan) for a in AXES], float)
     res = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
     half = Z95 * np.sqrt(se ** 2 + (RESOLUTION_PX * res) ** 2)
-    s = settings.search
+    s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
     return {"units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
@@ -245,10 +247,11 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring)."""
     x_opt = local_optimum(objective, x)
-    out = {"contrast": contrast_evidence(objective, settings, x_opt),
-           "intervals": intervals(quality, resolution(objective, x_opt), settings)}
+    out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
+           "intervals": intervals(quality, resolution(objective, x_opt), settings.search)}
     if settings.decision.restarts > 0:
-        out["restart"] = restart_evidence(objective, settings, n_min, n_max, x, x_opt)
+        out["restart"] = restart_evidence(objective, settings.search, settings.decision, n_min,
+                                          n_max, x, x_opt)
     return out
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..config import SearchSettings
 from ..quality import displacement_px, local_optimum
 from .refine import polish_front
 
@@ -68,8 +69,8 @@ def departure(x: np.ndarray, init_error_deg: float, init_error_m: float) -> floa
     return float(max(np.abs(x[:3]).max() / init_error_m, np.abs(x[3:6]).max() / init_error_deg))
 
 
-def prefer_near(objective, X: np.ndarray, F: np.ndarray, settings, n_min: int,
-                n_max: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
+def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
+                n_max: int, refine_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
     """Keep the start's basin unless the data support the front's best pose (module docstring).
 
     Parameters
@@ -77,8 +78,11 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, settings, n_min: int,
     objective : CalibrationObjective
     X, F : ndarray, shapes (k, 7) and (k, 2)
         The polished front.
-    settings : Settings
+    search : SearchSettings
+        The box and the stated initial error.
     n_min, n_max : int
+    refine_iters : int
+        Newton iterations of the front's polish when the front is rebuilt.
 
     Returns
     -------
@@ -105,7 +109,7 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, settings, n_min: int,
     sep_px = displacement_px(objective, near, far)
     T = objective.transforms(np.vstack([near, far]))
     e = pose_error(T[1], T[0])
-    s = settings.search
+    s = search
     info = {"separation_px": round(float(sep_px), 3),
             "separation_deg": round(float(e["rotation_deg"]), 4),
             "separation_cm": round(float(e["translation_cm"]), 3),
@@ -136,5 +140,6 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, settings, n_min: int,
     # (a front polished solution by solution may straddle both basins).
     ns = np.unique(X[:, 6])
     Xn = np.column_stack([np.tile(kept[:6], (len(ns), 1)), ns])
-    Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), settings, n_min, n_max)
+    Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), search, n_min, n_max,
+                               refine_iters)
     return Xn, Fn, info, evals + ev + len(Xn)

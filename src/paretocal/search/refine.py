@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import Settings
+from ..config import SearchSettings
 from .nsga import front_of
 from .polish import DEFAULT_FD_STEP, fd_gradient_hessian, newton_polish, polish
 from .problem import bounds
@@ -12,9 +12,8 @@ from .problem import bounds
 FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps after Newton
 
 
-def polish_front(objective, X: np.ndarray, F: np.ndarray,
-                 settings: Settings, n_min: int, n_max: int, grid: int = 12,
-                 max_front: int = 32):
+def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
+                 n_max: int, iters: int, grid: int = 12, max_front: int = 32):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
@@ -22,8 +21,9 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray,
     The grid fills parts of the n range the search's front did not reach, so the final front
     shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
 
-    ``objective`` has ``chamfer(X)["f1"]`` and ``cost(X)["f2"]`` for X of shape (C, 7).
-    Returns the new front ``(X, F)`` and the number of evaluations spent.
+    ``objective`` has ``chamfer(X)["f1"]`` and ``cost(X)["f2"]`` for X of shape (C, 7); the
+    box is the search's (``search``, ``n_min``, ``n_max``); ``iters`` Newton iterations per
+    polish (``decision.refine_iters``). Returns the new front ``(X, F)`` and the number of evaluations spent.
 
     Then the weakly determined directions of the best pose are explored: edge alignment
     constrains some combinations poorly (a small pitch against a few centimetres of height
@@ -32,9 +32,8 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray,
     largest n are polished, and the best pose at the largest n then seeds every n of the
     front again; each n keeps whichever basin scores lower.
     """
-    xl, xu = bounds(settings.search, n_min, n_max)
+    xl, xu = bounds(search, n_min, n_max)
     fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
-    iters = settings.decision.refine_iters
     evals = 0
 
     def run(seeds):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..config import ObjectiveSettings, SearchSettings
 from .polish import newton_polish
 
 JOINT_FRAMES = 6  # frames scoring the joint rotation x translation grid
@@ -103,16 +104,17 @@ def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n
     return P[chosen, :6], fP[chosen]
 
 
-def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) -> np.ndarray:
+def coarse_seeds(feats, T_init: np.ndarray, search: SearchSettings, objective: ObjectiveSettings,
+                 z_min: float, cost_model, n_max: int) -> np.ndarray:
     """Seed poses for the search, shape (k, 6): the prepared frames ``feats`` are scored with
-    their distance transforms truncated at ``settings.search.seed_truncation_px`` on a
-    rotation grid (:func:`grid_seeds`)."""
+    their distance transforms truncated at ``search.seed_truncation_px`` on a rotation grid
+    (:func:`grid_seeds`) with the objective's settings; ``z_min`` (m) as the features'."""
     import dataclasses
 
     from ..features.image import distance_transform
     from ..objective import CalibrationObjective, build_scene
 
-    s = settings.search
+    s = search
     tau = s.seed_truncation_px
     coarse = []
     for f in feats:
@@ -120,16 +122,16 @@ def coarse_seeds(feats, T_init: np.ndarray, settings, cost_model, n_max: int) ->
         img = dataclasses.replace(f.image, dt=dt, truncation_px=tau,
                                   mean_dt=float(dt.mean(dtype=np.float64)))
         coarse.append(dataclasses.replace(f, image=img))
-    z_min, outside = settings.features.z_min, settings.objective.outside
+    outside = objective.outside
     scene = build_scene(coarse, z_min, outside)
-    obj = CalibrationObjective(scene, T_init, settings.objective, cost_model, ucb_k=0.0)
+    obj = CalibrationObjective(scene, T_init, objective, cost_model, ucb_k=0.0)
     step_t = s.seed_grid_t_m if s.seed_grid_t_m and s.bound_t > s.seed_grid_t_m else None
     joint = None
     if step_t and len(coarse) > JOINT_FRAMES:
         # The joint grid is large: score it on a few frames spread over the sequence.
         pick = np.unique(np.linspace(0, len(coarse) - 1, JOINT_FRAMES).round().astype(int))
         few = build_scene([coarse[i] for i in pick], z_min, outside)
-        jobj = CalibrationObjective(few, T_init, settings.objective, cost_model, ucb_k=0.0)
+        jobj = CalibrationObjective(few, T_init, objective, cost_model, ucb_k=0.0)
         joint = lambda Z: jobj.chamfer(Z)["f1"]  # noqa: E731
     poses, _ = grid_seeds(lambda Z: obj.chamfer(Z)["f1"], s.bound_r, s.bound_t,
                           s.seed_grid_deg, min(s.seed_points, n_max), s.seed_count,
