@@ -710,7 +710,8 @@ def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]], ref_times: S
     return out
 
 
-def estimate_motion(clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
+def estimate_motion(  # noqa: PLR0913 - keyword-only options, each documented
+        clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
                     ref_times: Sequence[float] | None = None, per_frame: bool = False,
                     initial: Twist | None = None, max_speed: float = 70.0,
                     up: Sequence[float] = (0.0, 0.0, 1.0), points: int = 15000,

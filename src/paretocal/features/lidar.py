@@ -122,7 +122,8 @@ def _ring_geometry(ring_elevation_deg, n_rings: int, ring_spacing_deg: float | N
     return el, cross_jump_rel
 
 
-def lidar_features(points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
+def lidar_features(  # noqa: PLR0913 - keyword-only options, each documented
+        points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
                    cross_jump_m: float = 0.3, cross_jump_rel: float | None = None,
                    ground_tol_m: float | None = None,
                    intensity_jump: float = 0.5, min_range_m: float = 1.5,

@@ -34,10 +34,10 @@ def translation_grid(bound_m: float, step_m: float) -> np.ndarray:
     return np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def grid_seeds(chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n: int,
-               keep: int, chunk: int = 4096, step_t_m: float | None = None,
-               joint_step_deg: float = 5.0, joint_n: int = 30,
-               joint_chamfer=None) -> tuple[np.ndarray, np.ndarray]:
+def grid_seeds(  # noqa: PLR0913 - the grid, then keyword-only options
+        chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n: int, keep: int, *,
+        chunk: int = 4096, step_t_m: float | None = None, joint_step_deg: float = 5.0,
+        joint_n: int = 30, joint_chamfer=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``keep`` best poses from a rotation grid, polished on the same objective.
 
     Parameters
