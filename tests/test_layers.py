@@ -1,5 +1,5 @@
 """The package's layers only look down: inputs at the bottom, the numerical core above them, the
-pipeline's stages, then results, reports and the command line (README, Method)."""
+pipeline's stages, then results, reports and the command line (docs/architecture.md)."""
 
 import ast
 from pathlib import Path
@@ -101,3 +101,16 @@ def test_no_private_name_crosses_a_module():
                              for a in node.names
                              if a.name.startswith("_") and not a.name.startswith("__")]
     assert not crossing, "\n".join(crossing)
+
+
+def test_the_architecture_page_states_these_ranks():
+    """docs/architecture.md's layer table says what this test enforces."""
+    import re
+
+    page = Path(__file__).parents[1] / "docs" / "architecture.md"
+    stated = {}
+    for line in page.read_text(encoding="utf-8").splitlines():
+        m = re.match(r"\|\s*(\d+)\s*\|([^|]*)\|", line)
+        if m:
+            stated.update({name: int(m.group(1)) for name in re.findall(r"`(\w+)`", m.group(2))})
+    assert stated == RANKS
