@@ -17,6 +17,18 @@ import typer
 
 from .errors import ParetocalError, SettingsError
 
+# Options shared by several commands, declared once.
+Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")]
+Frames = Annotated[Optional[str], typer.Option("--frames", help="Frames: '0:10', '0,3,7' or stems.")]
+ConfigFile = Annotated[Optional[Path], typer.Option("--config",
+                                                    help="Settings file (YAML/JSON) by section.")]
+Seed = Annotated[Optional[int], typer.Option("--seed", help="Random seed (default 0).")]
+CameraOrConfig = Annotated[Optional[int], typer.Option(
+    "--camera", help="KITTI camera index 0-3 (default 2).")]
+Camera = Annotated[int, typer.Option("--camera", help="KITTI camera index 0-3.")]
+
+
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Targetless camera-LiDAR calibration as a Pareto search over accuracy "
                        "and computational cost.")
@@ -131,12 +143,12 @@ def calibrate(
         "--checkpoint-every", help="Save the search state every N generations (0: never).")] = 5,
     init: Annotated[Optional[Path], typer.Option(help="Initial extrinsic (YAML/JSON with "
                                                       "T_cam_lidar); default: the dataset's.")] = None,
-    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
-    seed: Annotated[Optional[int], typer.Option(help="Random seed (default 0).")] = None,
+    frames: Frames = None,
+    seed: Seed = None,
     pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
     gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
-    camera: Annotated[Optional[int], typer.Option(help="KITTI camera index 0-3 (default 2).")] = None,
-    config: Annotated[Optional[Path], typer.Option(help="Settings file (YAML/JSON) by section.")] = None,
+    camera: CameraOrConfig = None,
+    config: ConfigFile = None,
     budget_ms: Annotated[Optional[float], typer.Option(
         "--budget-ms", help="Choose the best Chamfer whose modelled evaluation time is within "
                             "this many ms, instead of the knee.")] = None,
@@ -165,8 +177,8 @@ def calibrate(
     strict: Annotated[bool, typer.Option(
         "--strict", help="Exit with status 3 when the result is judged unreliable (the outputs "
                          "are written either way).")] = False,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
 ) -> None:
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
@@ -273,7 +285,7 @@ def perturb(
     rot: Annotated[float, typer.Option(help="Per-axis rotation bound (+- deg).")] = 5.0,
     trans: Annotated[float, typer.Option(help="Per-axis translation bound (+- m).")] = 0.2,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+    camera: Camera = 2,
 ) -> None:
     """Write a decalibrated copy of the dataset's extrinsic as an --init file.
 
@@ -306,14 +318,14 @@ def check(
     source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
     extrinsic: Annotated[Path, typer.Option(help="Extrinsic to check (YAML/JSON with "
                                                  "T_cam_lidar).")],
-    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
-    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+    frames: Frames = None,
+    camera: Camera = 2,
     out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
     rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
     trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
-    config: Annotated[Optional[Path], typer.Option(help="Settings file.")] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    config: ConfigFile = None,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
 ) -> None:
     """Say whether EXTRINSIC is calibrated for SOURCE, without ground truth."""
     import json
@@ -348,17 +360,17 @@ def study(
     out: Annotated[Path, typer.Option("--out", help="Directory for the studies and report.html.")],
     init: Annotated[Optional[Path], typer.Option(help="Initial extrinsic (YAML/JSON with "
                                                       "T_cam_lidar); default: the dataset's.")] = None,
-    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
-    seed: Annotated[Optional[int], typer.Option(help="Random seed (default 0).")] = None,
+    frames: Frames = None,
+    seed: Seed = None,
     pop: Annotated[Optional[int], typer.Option(help="Population of NSGA-II and the DE "
                                                     "(default 1000, the paper's).")] = None,
     gens: Annotated[Optional[int], typer.Option(help="Generations (default 200).")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="Small budgets on a quarter of the "
                                                         "frames: a smoke test.")] = False,
-    camera: Annotated[Optional[int], typer.Option(help="KITTI camera index 0-3 (default 2).")] = None,
-    config: Annotated[Optional[Path], typer.Option(help="Settings file (YAML/JSON) by section.")] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+    camera: CameraOrConfig = None,
+    config: ConfigFile = None,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
 ) -> None:
     """Run the paper's studies (front, solution space, single-objective and epsilon-constraint
     checks, decision, innovization, weight robustness) and write report.html to --out."""
@@ -399,11 +411,11 @@ def depth(
     out: Annotated[Path, typer.Option("--out", help="Directory for the depth maps.")],
     extrinsic: Annotated[Optional[Path], typer.Option(
         help="T_cam_lidar to project with (YAML/JSON); default: the dataset's.")] = None,
-    frames: Annotated[Optional[str], typer.Option(help="Frames: '0:10', '0,3,7' or stems.")] = None,
-    camera: Annotated[int, typer.Option(help="KITTI camera index.")] = 2,
+    frames: Frames = None,
+    camera: Camera = 2,
     max_depth: Annotated[float, typer.Option("--max-depth", help="Colour scale of the "
                                                                  "overlays (m).")] = 50.0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+    quiet: Quiet = False,
 ) -> None:
     """Write per frame the sparse depth map: <stem>.png (KITTI depth benchmark: uint16, metres x
     256, 0 = no return), <stem>.npy (float32 metres) and <stem>_overlay.png."""
@@ -442,10 +454,10 @@ def batch(
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="PNG figures per run.")] = False,
     pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
     gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
-    seed: Annotated[Optional[int], typer.Option(help="Random seed (default 0).")] = None,
-    config: Annotated[Optional[Path], typer.Option(help="Settings file (YAML/JSON) by section.")] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")] = False,
+    seed: Seed = None,
+    config: ConfigFile = None,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
 ) -> None:
     """Calibrate every entry of MANIFEST as a task on Dask; skip entries already done."""
     from .batch import run_batch
