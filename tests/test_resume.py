@@ -41,13 +41,13 @@ def _stop_at(generation):
 def test_resume_gives_the_uninterrupted_result(tmp_path, start):
     frames, T = start
     whole = calibrate(frames, T, SMALL)
-    ck = Checkpoint(tmp_path / "ck.pkl", every=3)
+    ck = Checkpoint(tmp_path / "ck.npz", every=3)
     with pytest.raises(SearchInterrupted) as info:
         calibrate(frames, T, SMALL, progress=_stop_at(7), checkpoint=ck)
     assert info.value.generation == 7           # the stop came after generation 7 completed
     assert len(info.value.X) >= 1 and info.value.F.shape[1] == 2
     assert ck.path.exists()
-    resumed = calibrate(frames, T, SMALL, checkpoint=Checkpoint(tmp_path / "ck.pkl", every=3))
+    resumed = calibrate(frames, T, SMALL, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))
     np.testing.assert_array_equal(resumed.front.X, whole.front.X)
     np.testing.assert_array_equal(resumed.front.F, whole.front.F)
     np.testing.assert_array_equal(resumed.T_cam_lidar, whole.T_cam_lidar)
@@ -82,15 +82,40 @@ def test_a_run_folder_resumes_from_python(tmp_path, raw_date, start):
 
 def test_checkpoint_of_another_run_is_refused(tmp_path, start):
     frames, T = start
-    ck = Checkpoint(tmp_path / "ck.pkl", every=2)
+    ck = Checkpoint(tmp_path / "ck.npz", every=2)
     with pytest.raises(SearchInterrupted):
         calibrate(frames, T, SMALL, progress=_stop_at(5), checkpoint=ck)
     other = SMALL.replace(search={"seed": 4})
     with pytest.raises(InputError, match="another run"):
-        calibrate(frames, T, other, checkpoint=Checkpoint(tmp_path / "ck.pkl", every=2))
-    (tmp_path / "bad.pkl").write_bytes(b"not a pickle")
+        calibrate(frames, T, other, checkpoint=Checkpoint(tmp_path / "ck.npz", every=2))
+    (tmp_path / "bad.npz").write_bytes(b"not a checkpoint")
     with pytest.raises(InputError, match="unreadable checkpoint"):
-        calibrate(frames, T, SMALL, checkpoint=Checkpoint(tmp_path / "bad.pkl"))
+        calibrate(frames, T, SMALL, checkpoint=Checkpoint(tmp_path / "bad.npz"))
+
+
+def test_a_planted_pickle_never_runs(tmp_path, start):
+    """The checkpoint is read without unpickling: a pickle that would run code when loaded is
+    refused as unreadable, and its code does not run."""
+    import os
+    import pickle
+
+    marker = tmp_path / "ran"
+
+    class Payload:
+        def __reduce__(self):
+            return (os.mkdir, (str(marker),))
+
+    frames, T = start
+    bad = tmp_path / "checkpoint.npz"
+    bad.write_bytes(pickle.dumps({"format": 2, "state": Payload()}))
+    with pytest.raises(InputError, match="unreadable checkpoint"):
+        calibrate(frames, T, SMALL, checkpoint=Checkpoint(bad))
+    assert not marker.exists()
+    # An .npz holding an object array (pickled inside) is refused the same way.
+    np.savez(bad, meta=np.array([Payload()], dtype=object))
+    with pytest.raises(InputError, match="unreadable checkpoint"):
+        calibrate(frames, T, SMALL, checkpoint=Checkpoint(bad))
+    assert not marker.exists()
 
 
 CLI = ["--frames", "0:2", "--pop", "16", "--seed", "2", "--no-polish", "--no-figures",
@@ -104,22 +129,22 @@ def test_sigterm_keeps_checkpoint_and_resume_matches(tmp_path, raw_date):
            "--gens", gens, "--checkpoint-every", "10"] + CLI
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
-    while not (run / "checkpoint.pkl").exists() and time.time() < deadline:
+    while not (run / "checkpoint.npz").exists() and time.time() < deadline:
         time.sleep(0.05)
-    assert (run / "checkpoint.pkl").exists(), proc.communicate()
+    assert (run / "checkpoint.npz").exists(), proc.communicate()
     time.sleep(0.3)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "resume" in err and "Traceback" not in err
-    assert (run / "checkpoint.pkl").exists() and not (run / "result.json").exists()
+    assert (run / "checkpoint.npz").exists() and not (run / "result.json").exists()
     with open(run / "partial_front.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert rows and set(rows[0]) >= {"x", "yaw", "n", "chamfer", "cost"}
     assert not [p for p in os.listdir(run) if ".tmp" in p]
 
     assert main(["calibrate", "--resume", str(run)]) == 0
-    assert not (run / "checkpoint.pkl").exists()
+    assert not (run / "checkpoint.npz").exists()
     assert main(["calibrate", str(raw_date), "--out", str(ref), "--gens", gens,
                  "--checkpoint-every", "0"] + CLI) == 0
     a = json.loads((run / "result.json").read_text())

@@ -1,7 +1,7 @@
 """Run folders: a calibration written to a folder that can be resumed after an interrupt.
 
 ``calibrate_run`` writes ``run_args.json`` (what a resume needs: the source, the initial
-extrinsic, every setting, whether figures are drawn), saves the search to ``checkpoint.pkl``
+extrinsic, every setting, whether figures are drawn), saves the search to ``checkpoint.npz``
 every few generations, and on completion writes the run's files (``report.results.write_run``)
 and removes the checkpoint. An interrupt (SIGINT, or SIGTERM turned into one by the caller) during
 the search writes ``partial_front.csv`` and raises
@@ -30,7 +30,7 @@ from .search.checkpoint import Checkpoint, SearchInterrupted
 log = logging.getLogger(__name__)
 
 RUN_ARGS = "run_args.json"
-CHECKPOINT = "checkpoint.pkl"
+CHECKPOINT = "checkpoint.npz"
 PARTIAL_FRONT = "partial_front.csv"
 
 

@@ -1,17 +1,22 @@
 """Checkpoints of the NSGA-II search, so an interrupted run resumes exactly.
 
 The array engine's state (population, objectives, ranks, crowding, the numpy Generator) is
-pickled every few generations, atomically, with a fingerprint of everything the search depends
-on (settings, initial extrinsic, frames, ``n`` range, seed poses). Resuming from a checkpoint
-whose fingerprint matches continues the same random stream, so the result is bitwise the one
-an uninterrupted run gives; a checkpoint of another run is refused.
+saved every few generations, atomically and flushed to disk, with a fingerprint of everything
+the search depends on (settings, initial extrinsic, frames, ``n`` range, seed poses). Resuming
+from a checkpoint whose fingerprint matches continues the same random stream, so the result is
+bitwise the one an uninterrupted run gives; a checkpoint of another run is refused.
+
+The file is a numpy ``.npz`` archive of plain arrays plus one JSON text (format, fingerprint,
+generation, evaluations, the Generator's state, the history), read with
+``allow_pickle=False``: loading a checkpoint cannot run code, whoever wrote the file.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import pickle
+import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +25,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.atomic import atomic_path
 
-FORMAT = 1
+FORMAT = 2
+ARRAYS = ("X", "F", "rank", "crowding")
 
 
 def fingerprint(*parts) -> str:
@@ -67,27 +73,44 @@ class Checkpoint:
     key: str = ""
 
     def save(self, state, history: list) -> None:
-        doc = {"format": FORMAT, "key": self.key, "state": state, "history": history}
+        meta = {"format": FORMAT, "key": self.key, "generation": int(state.generation),
+                "evaluations": int(state.evaluations),
+                "rng": state.rng.bit_generator.state, "history": history}
+        arrays = {k: np.asarray(getattr(state, k)) for k in ARRAYS}
         with atomic_path(Path(self.path)) as tmp:
             with open(tmp, "wb") as fh:
-                pickle.dump(doc, fh, protocol=pickle.HIGHEST_PROTOCOL)
+                np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
 
     def load(self):
         """``(state, history)`` from the file, or None when there is none.
 
         Raises :class:`InputError` when the file belongs to another run or is unreadable.
         """
+        from .lean import LeanState
+
         path = Path(self.path)
         if not path.exists():
             return None
         try:
-            with open(path, "rb") as fh:
-                doc = pickle.load(fh)
-        except Exception as exc:  # noqa: BLE001 - any unreadable pickle is the same error
-            raise InputError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})") from None
-        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-            raise InputError(f"{path}: not a paretocal checkpoint of this version")
-        if doc.get("key") != self.key:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+                arrays = {k: np.array(z[k]) for k in ARRAYS}
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                raise InputError(f"{path}: not a paretocal checkpoint of this version")
+            rng_state = meta["rng"]
+            bit_gen = getattr(np.random, rng_state["bit_generator"])()
+            bit_gen.state = rng_state
+        except InputError:
+            raise
+        except (OSError, ValueError, KeyError, TypeError, AttributeError,
+                zipfile.BadZipFile) as exc:
+            raise InputError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})"
+                             ) from None
+        if meta.get("key") != self.key:
             raise InputError(f"{path}: the checkpoint belongs to another run (different data, "
                              "extrinsic or settings); remove it or use another --out")
-        return doc["state"], doc["history"]
+        state = LeanState(rng=np.random.Generator(bit_gen), generation=int(meta["generation"]),
+                          evaluations=int(meta["evaluations"]), **arrays)
+        return state, meta["history"]
