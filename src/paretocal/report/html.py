@@ -1,11 +1,19 @@
-"""A self-contained HTML report of a study (figures inlined, no network access needed)."""
+"""A self-contained HTML report of a study (figures inlined, no network access needed).
+
+The page's skeleton and style sheet are package data in ``report/templates/`` (``study.html``,
+``study.css``), filled with :class:`string.Template`; :func:`template` also serves the
+interactive page's templates.
+"""
 
 from __future__ import annotations
 
 import base64
+import functools
 import html
 import json
+from importlib import resources
 from pathlib import Path
+from string import Template
 
 from ..io.atomic import atomic_write_text
 
@@ -38,15 +46,11 @@ SECTIONS = [
      "calibrated with several seeds."),
 ]
 
-CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1280px;margin:2em auto;
-padding:0 1em;color:#222;line-height:1.45}
-h1{margin-bottom:0.2em} h2{border-bottom:1px solid #ddd;padding-bottom:0.2em;margin-top:1.6em}
-img{max-width:100%;border:1px solid #eee} table{border-collapse:collapse;margin:0.6em 0;font-size:0.9em}
-td,th{border:1px solid #ccc;padding:0.25em 0.6em;text-align:right} th{background:#f4f4f4}
-td:first-child,th:first-child{text-align:left} .muted{color:#666;font-size:0.9em}
-pre{background:#f7f7f7;padding:0.8em;overflow-x:auto;font-size:0.8em} code{background:#f3f3f3}
-"""
+
+@functools.lru_cache(maxsize=None)
+def template(name: str) -> str:
+    """The text of ``report/templates/<name>`` (package data, read once per process)."""
+    return (resources.files("paretocal.report") / "templates" / name).read_text(encoding="utf-8")
 
 
 def _img(path: Path) -> str:
@@ -126,10 +130,8 @@ def study_report(doc: dict, fig_dir: Path, path: Path) -> None:
     """Write ``path``: every figure inlined, the key figures, settings, versions and timings."""
     fig_dir = Path(fig_dir)
     facts = _facts(doc)
-    parts = [f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
-             f"<title>paretocal study</title><style>{CSS}</style></head><body>",
-             "<h1>paretocal study</h1>",
-             f"<p class='muted'>paretocal {html.escape(doc['version'])}, Python "
+    # The body between the heading and the data credit; study.html holds the rest of the page.
+    parts = [f"<p class='muted'>paretocal {html.escape(doc['version'])}, Python "
              f"{html.escape(doc['python'])}; source <code>{html.escape(str(doc['source']))}</code>, "
              f"{len(doc['frames'])} frames; seed {doc['settings']['search']['seed']}; "
              f"total {doc['timings_s'].get('total', 0):.0f} s.</p>"]
@@ -153,6 +155,7 @@ def study_report(doc: dict, fig_dir: Path, path: Path) -> None:
     parts.append("<details><summary>study plan and settings</summary><pre>"
                  + html.escape(json.dumps({"plan": doc["plan"], "settings": doc["settings"]},
                                           indent=1)) + "</pre></details>")
-    parts.append("<p class='muted'>data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0, "
-                 "where the source is KITTI.</p></body></html>")
-    atomic_write_text(path, "\n".join(parts) + "\n")
+    # substitute() fails on a missing placeholder; the values themselves are not scanned for $.
+    page = Template(template("study.html")).substitute(css=template("study.css"),
+                                                       body="\n".join(parts))
+    atomic_write_text(path, page)

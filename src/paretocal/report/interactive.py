@@ -7,6 +7,10 @@ the solution clicked on the front, or the initial, chosen or reference extrinsic
 projects through the camera's own model (pinhole with radial-tangential distortion, fisheye,
 Mei) with the arithmetic of :meth:`paretocal.camera.Camera.project_camera_points`, on the
 image as it was taken.
+
+The page's skeleton, style sheet and script are package data in ``report/templates/``
+(``interactive.html``, ``interactive.css``, ``interactive.js``); the skeleton's ``$name``
+placeholders are filled with :class:`string.Template`.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import base64
 import html
 import json
 from pathlib import Path
+from string import Template
 
 import cv2
 import numpy as np
@@ -22,172 +27,13 @@ import numpy as np
 from ..camera import project
 from ..io.atomic import atomic_write_text
 from ..io.frame import Frame
+from .html import template
 
 #: Largest number of LiDAR points embedded in the page.
 MAX_POINTS = 20000
 #: Depth (m) at the cold end of the colour scale, as in the static overlays.
 MAX_DEPTH = 30.0
 JPEG_QUALITY = 88
-
-CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1300px;margin:1.2em auto;
-padding:0 1em;color:#222;line-height:1.4}
-h1{font-size:1.4em;margin:0.2em 0}
-.row{display:grid;grid-template-columns:minmax(0,1fr) auto;gap:1.2em;align-items:start}
-.plotbox{grid-column:1;grid-row:1;min-width:0} #run-info{grid-column:2;grid-row:1}
-table{border-collapse:collapse;font-size:0.88em}
-td,th{border:1px solid #ccc;padding:0.2em 0.55em;text-align:left} th{background:#f4f4f4;font-weight:600}
-#overlay{width:100%;max-width:100%;height:auto;border:1px solid #ddd;display:block;background:#fff}
-.views button{font:inherit;padding:0.25em 0.9em;margin-right:0.4em;border:1px solid #999;
-border-radius:4px;background:#f7f7f7;cursor:pointer} .views button.active{background:#d33;color:#fff;
-border-color:#a00} #caption{margin:0.4em 0;font-size:0.95em} .muted{color:#666;font-size:0.85em}
-.verdict{padding:0.5em 0.9em;margin:0.5em 0;border-radius:4px;font-weight:600}
-.verdict ul{margin:0.3em 0 0 1.2em;padding:0;font-weight:400}
-.verdict.ok{background:#e6f4ea;border:1px solid #2e7d32} .verdict.unreliable{background:#fdecea;
-border:2px solid #c62828}
-"""
-
-JS = r"""
-(function () {
-  "use strict";
-  var D = JSON.parse(document.getElementById("paretocal-data").textContent);
-  var canvas = document.getElementById("overlay"), ctx = canvas.getContext("2d");
-  var caption = document.getElementById("caption"), W = D.width, H = D.height;
-  var bin = atob(D.points.b64), buf = new Uint8Array(bin.length);
-  for (var b = 0; b < bin.length; b++) buf[b] = bin.charCodeAt(b);
-  var P = new Float32Array(buf.buffer), N = D.points.count, gd = null;
-  var img = new Image(), pending = null, plotReady = false, imageReady = false;
-  // The camera model as paretocal.camera.Camera.kernel_params (null stands for infinity).
-  var C = D.camera.params.map(function (v) { return v === null ? Infinity : v; });
-  var KIND = C[0], FX = C[1], FY = C[2], CX = C[3], CY = C[4], SK = C[5], XI = C[6];
-  var K1 = C[7], K2 = C[8], K3 = C[9], K4 = C[10], K5 = C[11], K6 = C[12], P1 = C[13], P2 = C[14];
-  var S1 = C[15], S2 = C[16], S3 = C[17], S4 = C[18], LIM = C[19], ZS_MIN = C[20];
-  var ZMIN = D.z_min, ZMIN2 = D.z_min * D.z_min, UV = [0, 0];
-
-  // Camera-frame point -> pixel (UV) through the lens model; false outside its domain.
-  // Kinds: 0 ideal pinhole, 1 pinhole with radial-tangential distortion, 2 fisheye
-  // (equidistant), 3 Mei (unified). Pixel origin at the centre of the top-left pixel.
-  function projectPoint(xc, yc, zc) {
-    var xd, yd;
-    if (KIND === 2) {
-      var rho2 = xc * xc + yc * yc;
-      if (!(rho2 + zc * zc > ZMIN2)) return false;
-      var rho = Math.sqrt(rho2), th = Math.atan2(rho, zc);
-      if (!(th < LIM)) return false;
-      var t2 = th * th, td = th * (1 + t2 * (K1 + t2 * (K2 + t2 * (K3 + t2 * K4))));
-      var sc = rho > 0 ? td / rho : 0;
-      xd = sc * xc; yd = sc * yc;
-    } else {
-      var den = zc;
-      if (KIND === 3) {
-        var n2 = xc * xc + yc * yc + zc * zc;
-        if (!(n2 > ZMIN2)) return false;
-        var nrm = Math.sqrt(n2);
-        if (!(zc > ZS_MIN * nrm)) return false;
-        den = zc + XI * nrm;
-      } else if (!(zc > ZMIN)) return false;
-      var iden = 1 / den, xn = xc * iden, yn = yc * iden;
-      if (KIND === 0) { xd = xn; yd = yn; }
-      else {
-        var r2 = xn * xn + yn * yn;
-        if (!(r2 < LIM)) return false;
-        var r4 = r2 * r2, xy = xn * yn;
-        var rad = (1 + r2 * (K1 + r2 * (K2 + r2 * K3))) / (1 + r2 * (K4 + r2 * (K5 + r2 * K6)));
-        xd = xn * rad + 2 * P1 * xy + P2 * (r2 + 2 * xn * xn) + S1 * r2 + S2 * r4;
-        yd = yn * rad + P1 * (r2 + 2 * yn * yn) + 2 * P2 * xy + S3 * r2 + S4 * r4;
-      }
-    }
-    UV[0] = FX * xd + SK * yd + CX; UV[1] = FY * yd + CY;
-    return isFinite(UV[0]) && isFinite(UV[1]);
-  }
-
-  function draw(T) {
-    var vis = [], zs = new Float64Array(N), us = new Float64Array(N), vs = new Float64Array(N);
-    for (var i = 0; i < N; i++) {
-      var x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
-      var xc = T[0][0] * x + T[0][1] * y + T[0][2] * z + T[0][3];
-      var yc = T[1][0] * x + T[1][1] * y + T[1][2] * z + T[1][3];
-      var zc = T[2][0] * x + T[2][1] * y + T[2][2] * z + T[2][3];
-      if (!projectPoint(xc, yc, zc)) continue;
-      var u = UV[0], v = UV[1];
-      if (u < 0 || u > W - 1 || v < 0 || v > H - 1) continue;
-      zs[i] = zc; us[i] = u; vs[i] = v; vis.push(i);
-    }
-    vis.sort(function (a, c) { return zs[c] - zs[a]; });   // far first, near on top
-    ctx.drawImage(img, 0, 0, W, H);
-    var im = ctx.getImageData(0, 0, W, H), px = im.data, L = D.lut, n = L.length;
-    for (var k = 0; k < vis.length; k++) {
-      var j = vis[k], q = Math.min(n - 1, Math.floor(zs[j] / D.max_depth * (n - 1)));
-      var u0 = Math.floor(us[j]), v0 = Math.floor(vs[j]);
-      for (var dv = 0; dv < 2; dv++) {
-        for (var du = 0; du < 2; du++) {
-          var uu = u0 + du, vv = v0 + dv;
-          if (uu >= W || vv >= H) continue;
-          var o = 4 * (vv * W + uu);
-          px[o] = L[q][0]; px[o + 1] = L[q][1]; px[o + 2] = L[q][2]; px[o + 3] = 255;
-        }
-      }
-    }
-    ctx.putImageData(im, 0, 0);
-    return vis.length;
-  }
-
-  function show(view) {
-    // view: a solution index, or "initial", "chosen", "reference".
-    if (!imageReady) { pending = view; return; }
-    var T, text, key, sel = null;
-    if (view === "chosen") view = D.chosen;
-    if (view === "initial") { T = D.T_init; text = D.captions.initial; key = "initial"; }
-    else if (view === "reference" && D.T_ref) { T = D.T_ref; text = D.captions.reference; key = "reference"; }
-    else {
-      var s = D.solutions[Number(view)];
-      if (!s) return;
-      T = s.T; text = s.caption; key = String(Number(view)); sel = s;
-    }
-    var count = draw(T);
-    caption.textContent = text + " \u2014 " + count + " of " + N + " embedded points in view";
-    canvas.setAttribute("data-solution", key);
-    var btns = document.querySelectorAll(".views button");
-    for (var m = 0; m < btns.length; m++) {
-      var v = btns[m].getAttribute("data-view");
-      var on = v === key || (v === "chosen" && key === String(D.chosen));
-      btns[m].className = on ? "active" : "";
-    }
-    if (gd && plotReady) {
-      Plotly.restyle(gd, {x: [sel ? [sel.f1] : []], y: [sel ? [sel.f2] : []]}, [2]);
-    }
-  }
-
-  function ready() {
-    if (plotReady && imageReady) document.body.setAttribute("data-ready", "1");
-  }
-
-  function attachPlot() {
-    if (plotReady) return;
-    gd = document.getElementById("pareto");
-    gd.on("plotly_click", function (ev) {
-      var p = ev && ev.points && ev.points[0];
-      if (p && typeof p.customdata === "number") show(p.customdata);
-    });
-    plotReady = true;
-    ready();
-  }
-
-  var btns = document.querySelectorAll(".views button");
-  for (var m = 0; m < btns.length; m++) {
-    btns[m].addEventListener("click", function (e) { show(e.currentTarget.getAttribute("data-view")); });
-  }
-  img.onload = function () {
-    imageReady = true;
-    show(pending === null ? "chosen" : pending);
-    ready();
-  };
-  img.src = D.image;
-  window.paretocal = {show: show, data: D};
-  if (window.paretocalPlotReady) attachPlot();
-  else document.addEventListener("paretocal-plot-ready", attachPlot);
-})();
-"""
 
 # Runs after Plotly.newPlot resolves (plotly's ``post_script``).
 POST_SCRIPT = ("window.paretocalPlotReady = true; "
@@ -421,37 +267,16 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
     if result.T_ref is not None:
         buttons.append('<button type="button" data-view="reference" id="view-reference">'
                        'reference</button>')
-    # The run table comes before the plot in the document (the grid puts it on the right), so
+    # interactive.html puts the run table before the plot (the grid shows it on the right), so
     # the plot's container has its final width when plotly.js sizes the figure.
     title = f"paretocal calibration run: {len(result.frames)} frame(s), n = {result.n_points}"
-    page = f"""<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{html.escape(title)}</title>
-<style>{CSS}</style>
-</head>
-<body>
-<h1>{html.escape(title)}</h1>
-{_verdict_banner(result)}
-<p class="muted">Hover a solution of the front for its variables and cost; click it to project
-the LiDAR points of frame {html.escape(f.name)} with its extrinsic. The buttons compare the
-initial, the chosen and (when known) the dataset's reference extrinsic.</p>
-<div class="row">
-<div id="run-info">{_run_table(result, f)}</div>
-<div class="plotbox">{plot}</div>
-</div>
-<div class="views">{''.join(buttons)}</div>
-<p id="caption">loading\u2026</p>
-<canvas id="overlay" width="{int(cam.width)}" height="{int(cam.height)}" data-solution=""></canvas>
-<p class="muted">Colour = depth 0-{MAX_DEPTH:g} m (near is warm); {len(pts)} LiDAR points
-embedded (those in view for some extrinsic of the page, at most {max_points}).
-{html.escape(KITTI_CREDIT)}</p>
-<script type="application/json" id="paretocal-data">{_json_script(data)}</script>
-<script>{JS}</script>
-</body>
-</html>
-"""
+    # substitute() fails on a missing placeholder; the values (the script, plotly.js) are not
+    # scanned, so a $ in them is inert.
+    page = Template(template("interactive.html")).substitute(
+        title=html.escape(title), verdict=_verdict_banner(result), frame_name=html.escape(f.name),
+        run_table=_run_table(result, f), plot=plot, buttons="".join(buttons),
+        width=int(cam.width), height=int(cam.height), max_depth=f"{MAX_DEPTH:g}",
+        n_points=len(pts), max_points=max_points, credit=html.escape(KITTI_CREDIT),
+        data=_json_script(data), css=template("interactive.css"), js=template("interactive.js"))
     atomic_write_text(path, page)
     return path
