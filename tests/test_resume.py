@@ -80,6 +80,37 @@ def test_a_run_folder_resumes_from_python(tmp_path, raw_date, start):
         run_arguments(tmp_path)
 
 
+def test_one_run_per_folder(tmp_path, raw_date, start):
+    """A folder another process writes is refused, naming it; a run refused for its input
+    leaves an interrupted run's folder resumable; a rerun publishes only its own files."""
+    from paretocal import calibrate_run, resume_run
+    from paretocal.rundir import CHECKPOINT, PARTIAL_FRONT, RUN_ARGS, locked
+
+    _, T = start
+    s = dataclasses.replace(SMALL, frames="0:2")
+    run = tmp_path / "run"
+    with locked(run):                      # as another process holding the folder would
+        with pytest.raises(ParetocalError, match=f"another paretocal run .*pid {os.getpid()}"):
+            calibrate_run(raw_date, run, T, s, figures=False)
+    assert not run.exists()                # created for the lock only: removed again
+    with pytest.raises(SearchInterrupted):
+        calibrate_run(raw_date, run, T, s, figures=False, checkpoint_every=2,
+                      progress=_stop_at(5))
+    args = (run / RUN_ARGS).read_text()
+    with pytest.raises(InputError, match="another run"):
+        calibrate_run(raw_date, run, T, dataclasses.replace(s, frames="0:3"), figures=False)
+    assert (run / RUN_ARGS).read_text() == args and (run / CHECKPOINT).exists()
+    resume_run(run)
+    assert not (run / PARTIAL_FRONT).exists() and (run / "result.json").exists()
+    # A rerun with figures, then without: the figures of the first do not stay behind.
+    calibrate_run(raw_date, run, T, s, figures=True)
+    assert (run / "pareto.png").exists() and (run / "interactive.html").exists()
+    calibrate_run(raw_date, run, T, s, figures=False)
+    names = {p.name for p in run.iterdir()}
+    assert not {"pareto.png", "interactive.html", "overlay_after.png"} & names, names
+    assert not {".staging", ".lock"} & names and "result.json" in names
+
+
 def test_checkpoint_of_another_run_is_refused(tmp_path, start):
     frames, T = start
     ck = Checkpoint(tmp_path / "ck.npz", every=2)
@@ -162,3 +193,11 @@ def test_resume_needs_a_run_directory(tmp_path, capsys):
     assert "run_args.json" in capsys.readouterr().err
     assert main(["calibrate", "--out", str(tmp_path)]) == 2
     assert "SOURCE" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [["--pop", "2"], ["--gens", "0", "--out", "elsewhere"],
+                                   ["--no-figures"], ["--seed", "4"]])
+def test_resume_refuses_options_that_would_change_the_run(tmp_path, capsys, extra):
+    assert main(["calibrate", "--resume", str(tmp_path), *extra]) == 2
+    err = capsys.readouterr().err
+    assert "remove" in err and extra[0] in err and err.count("\n") == 1

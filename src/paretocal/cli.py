@@ -187,6 +187,19 @@ def calibrate(
 
     _setup_logging(verbose, quiet)
     if resume is not None:
+        given = {"SOURCE": source, "--out": out, "--init": init, "--frames": frames,
+                 "--seed": seed, "--pop": pop, "--gens": gens, "--camera": camera,
+                 "--config": config, "--budget-ms": budget_ms, "--rule": rule,
+                 "--max-deviation": max_deviation, "--n-min": n_min, "--n-max": n_max,
+                 "--init-error": init_error, "--bound-t": bound_t, "--bound-r": bound_r,
+                 "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
+                 "--evaluator": evaluator, "--polish/--no-polish": polish,
+                 "--no-figures": None if figures else False}
+        clash = [name for name, value in given.items() if value is not None]
+        if clash:
+            raise SettingsError(f"--resume {resume} continues the run with the data, start and "
+                                f"settings it recorded; remove {', '.join(clash)} (only "
+                                "--checkpoint-every, --strict, --verbose and --quiet apply)")
         return _resume(resume, verbose, quiet, checkpoint_every, strict)
     if source is None or out is None:
         raise SettingsError("calibrate needs SOURCE and --out (or --resume RUN_DIR)")

@@ -1,18 +1,32 @@
 """Run folders: a calibration written to a folder that can be resumed after an interrupt.
 
-``calibrate_run`` writes ``run_args.json`` (what a resume needs: the source, the initial
-extrinsic, every setting, whether figures are drawn), saves the search to ``checkpoint.npz``
-every few generations, and on completion writes the run's files (``report.results.write_run``)
-and removes the checkpoint. An interrupt (SIGINT, or SIGTERM turned into one by the caller) during
-the search writes ``partial_front.csv`` and raises
+``calibrate_run`` saves the search to ``checkpoint.npz`` every few generations, with
+``run_args.json`` beside it (what a resume needs: the source, the initial extrinsic, every
+setting, whether figures are drawn), and on completion publishes the run's files
+(``report.results.write_run``) and removes the checkpoint. An interrupt (SIGINT, or SIGTERM
+turned into one by the caller) during the search writes ``partial_front.csv`` and raises
 :class:`~paretocal.search.checkpoint.SearchInterrupted`; ``resume_run`` rebuilds the run from the
 folder and continues from the checkpoint to the result the uninterrupted run gives.
+
+A folder holds one run:
+
+* one process at a time: ``.lock`` is held (``flock``) for the whole run and names the process
+  holding it; a second run into the folder is refused with that name;
+* nothing is written before the search starts: a run refused for its input (a bad scene, a
+  checkpoint of another run) leaves the folder as it was, so an interrupted run in it can still
+  be resumed; ``run_args.json`` is written with the first checkpoint;
+* the outputs are written to ``.staging/`` first, then the previous run's outputs (listed in
+  ``.outputs``) are removed, the new ones moved in, and ``result.json`` moved last: a folder
+  with ``result.json`` holds exactly one complete run, one without it no complete run.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +46,85 @@ log = logging.getLogger(__name__)
 RUN_ARGS = "run_args.json"
 CHECKPOINT = "checkpoint.npz"
 PARTIAL_FRONT = "partial_front.csv"
+LOCK = ".lock"
+STAGING = ".staging"
+OUTPUTS = ".outputs"         #: the names the last published run wrote, one per line
+RESULT = "result.json"       #: published last: the completion marker
+
+
+@contextlib.contextmanager
+def locked(out: Path):
+    """Hold ``out/.lock`` for the duration (``out`` is created if needed and removed again
+    when it was created here and is left empty). Raises :class:`ParetocalError` naming the
+    process that holds the lock."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no lock
+        yield
+        return
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown"
+            raise ParetocalError(f"{out}: another paretocal run is writing this folder "
+                                 f"({holder}); wait for it to finish or use another --out"
+                                 ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
+        try:
+            yield
+        finally:
+            (out / LOCK).unlink(missing_ok=True)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()                # only when nothing else was written
+
+
+def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
+                figures: bool = True) -> list[Path]:
+    """Write the run's files into ``out`` so that it never holds parts of two runs (module
+    docstring); returns the published paths."""
+    staging = out / STAGING
+    shutil.rmtree(staging, ignore_errors=True)
+    written = write_run(result, staging, frames, figures=figures)
+    names = [p.relative_to(staging).as_posix() for p in written]
+    # The marker goes first, then everything the previous run published or left behind.
+    (out / RESULT).unlink(missing_ok=True)
+    previous = out / OUTPUTS
+    old = previous.read_text(encoding="utf-8").split() if previous.is_file() else []
+    for name in set(old) | {PARTIAL_FRONT}:
+        target = out / name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target, ignore_errors=True)
+        else:
+            target.unlink(missing_ok=True)
+    atomic_write_text(previous, "\n".join(names) + "\n")
+    for name in sorted(names, key=lambda n: n == RESULT):
+        os.replace(staging / name, out / name)
+    shutil.rmtree(staging, ignore_errors=True)
+    return [out / n for n in names]
+
+
+class _RunCheckpoint(Checkpoint):
+    """A checkpoint that writes the run's arguments beside itself the first time it saves."""
+
+    def __init__(self, path: Path, every: int, args: dict):
+        super().__init__(path, every)
+        self.args = args
+
+    def save(self, state, history: list) -> None:
+        if self.args is not None:
+            atomic_write_text(Path(self.path).parent / RUN_ARGS,
+                              json.dumps(self.args, indent=1) + "\n")
+            self.args = None
+        super().save(state, history)
 
 
 def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
@@ -65,23 +158,22 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
     out = Path(out)
     if frames is None:
         frames = load_frames(source, settings.frames, settings.camera)
-    ckpt = None
-    if checkpoint_every > 0:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / RUN_ARGS, json.dumps({
-            "source": str(Path(source).resolve()),
-            "T_init": None if T_init is None else np.asarray(T_init).tolist(),
-            "settings": settings.to_dict(), "figures": bool(figures)}, indent=1) + "\n")
-        ckpt = Checkpoint(out / CHECKPOINT, every=checkpoint_every)
-    try:
-        result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt)
-        write_run(result, out, result.sweeps or frames, figures=figures)
-    except SearchInterrupted as exc:
-        atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
-        raise
-    if ckpt is not None:
-        # A finished run needs no checkpoint; its arguments stay as a record.
-        Path(ckpt.path).unlink(missing_ok=True)
+    with locked(out):
+        ckpt = None
+        if checkpoint_every > 0:
+            ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, {
+                "source": str(Path(source).resolve()),
+                "T_init": None if T_init is None else np.asarray(T_init).tolist(),
+                "settings": settings.to_dict(), "figures": bool(figures)})
+        try:
+            result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt)
+            publish_run(result, out, result.sweeps or frames, figures=figures)
+        except SearchInterrupted as exc:
+            atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
+            raise
+        if ckpt is not None:
+            # A finished run needs no checkpoint; its arguments stay as a record.
+            Path(ckpt.path).unlink(missing_ok=True)
     return result
 
 
