@@ -8,7 +8,7 @@ distance), ``SBX`` and ``PM`` (their array kernels, with the same mating probabi
 non-dominated sorting and the crowding distance, and the randomised split of the last front.
 
 The whole state is a few arrays and a numpy Generator, so a run can be checkpointed and resumed
-exactly by pickling it.
+exactly (:mod:`paretocal.search.checkpoint` stores it as arrays and JSON).
 """
 
 from __future__ import annotations
