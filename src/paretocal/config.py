@@ -84,7 +84,6 @@ class SearchSettings:
 
     pop: int = 300
     gens: int = 120
-    engine: str = "lean"             #: "lean": NSGA-II on arrays with pymoo's operators (the only one)
     seed: int = 0
     #: How far off the initial extrinsic may be, per axis (deg, m): sets the search box.
     init_error_deg: float = 10.0
@@ -299,7 +298,6 @@ def _check_features(f: FeatureSettings) -> None:
 #: The allowed values of every setting that takes a word, by (section, name): the one list the
 #: validation, the command line's choices and the documentation read.
 CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
-    ("search", "engine"): ("lean",),
     ("objective", "chamfer"): ("edge-dt", "paper"),
     ("objective", "outside"): ("mean", "truncation"),
     ("objective", "cost"): ("model", "psutil"),
@@ -384,21 +382,23 @@ def load_settings(path: str | Path | None, base: Settings | None = None) -> Sett
     return settings_from_mapping(read_mapping(Path(path)), str(path), base)
 
 
-#: Settings that no longer exist, with the one value that still means what the code does: files
-#: written before their removal load; any other value is refused, naming the key.
-RETIRED = {("search", "eliminate_duplicates"): False}
+#: Settings that no longer exist: the one value that still means what the code does, and why
+#: the others went. Files written before their removal load; any other value is refused, naming
+#: the key.
+_ONE_ENGINE = "the package runs one NSGA-II engine, on arrays; pymoo's own algorithm object is gone"
+RETIRED = {("search", "engine"): ("lean", _ONE_ENGINE),
+           ("search", "eliminate_duplicates"): (False, _ONE_ENGINE + ", and only it eliminated "
+                                                       "duplicates")}
 
 
 def _drop_retired(data: dict, name: str) -> dict:
     out = dict(data)
-    for (section, key), value in RETIRED.items():
+    for (section, key), (value, why) in RETIRED.items():
         sec = out.get(section)
         if isinstance(sec, dict) and key in sec:
             if sec[key] != value:
                 raise SettingsError(f"{name}: {section}.{key}: {sec[key]!r} is no longer "
-                                    f"available (only pymoo's own NSGA-II object, which the "
-                                    f"package no longer runs, eliminated duplicates); remove "
-                                    f"the key")
+                                    f"available ({why}); remove the key")
             out[section] = {k: v for k, v in sec.items() if k != key}
     return out
 
