@@ -20,7 +20,7 @@ from pymoo.operators.sampling.rnd import FloatRandomSampling
 from pymoo.operators.selection.tournament import TournamentSelection
 
 from paretocal.search.lean import tournament_winners
-from paretocal.search.nsga import SearchResult, front_of
+from paretocal.search.nsga import SearchResult, TimedObjective, front_of
 from paretocal.search.problem import RoundN, SamplingWithInit, bounds
 
 
@@ -66,28 +66,19 @@ def run_pymoo_nsga2(objective, settings, n_min: int, n_max: int, algorithm=None,
     """Like :func:`paretocal.search.run_nsga2`, with pymoo's algorithm object (``algorithm``,
     default :func:`make_algorithm`); no checkpoints."""
     xl, xu = bounds(settings, n_min, n_max)
-    spent = {"s": 0.0, "n": 0}
-
-    class Timed:
-        def evaluate(self, X):
-            t0 = time.perf_counter()
-            F = objective.evaluate(X)
-            spent["s"] += time.perf_counter() - t0
-            spent["n"] += len(X)
-            return F
-
+    timed = TimedObjective(objective)
     algo = algorithm if algorithm is not None else make_algorithm(settings, seeds)
     t0 = time.perf_counter()
-    algo.setup(CalibrationProblem(Timed(), xl, xu), termination=("n_gen", settings.gens),
+    algo.setup(CalibrationProblem(timed, xl, xu), termination=("n_gen", settings.gens),
                seed=settings.seed, verbose=False, save_history=False)
     gen, history = 0, []
     while algo.has_next():
         algo.next()
         gen += 1
         history.append({"gen": gen, "best_f1": float(algo.pop.get("F")[:, 0].min()),
-                        "evaluations": spent["n"]})
+                        "evaluations": timed.evaluations})
     popX, popF = algo.pop.get("X"), algo.pop.get("F")
     Xf, Ff = front_of(popX, popF)
-    return SearchResult(X=Xf, F=Ff, pop_X=popX, pop_F=popF, evaluations=spent["n"],
+    return SearchResult(X=Xf, F=Ff, pop_X=popX, pop_F=popF, evaluations=timed.evaluations,
                         generations=gen, wall_s=time.perf_counter() - t0,
-                        objective_s=spent["s"], history=history)
+                        objective_s=timed.seconds, history=history)

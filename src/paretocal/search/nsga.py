@@ -55,7 +55,7 @@ class SearchResult:
     history: list = field(default_factory=list)
 
 
-class _TimedObjective:
+class TimedObjective:
     """Wraps an objective to measure the time spent evaluating."""
 
     def __init__(self, objective):
@@ -108,7 +108,7 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
         into one) the state of the last completed generation is saved and
         :class:`SearchInterrupted` is raised with its non-dominated set.
     """
-    timed = _TimedObjective(objective)
+    timed = TimedObjective(objective)
     xl, xu = bounds(settings, n_min, n_max)
     history = []
 
