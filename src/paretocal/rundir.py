@@ -99,12 +99,8 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
     (out / RESULT).unlink(missing_ok=True)
     previous = out / OUTPUTS
     old = previous.read_text(encoding="utf-8").split() if previous.is_file() else []
-    for name in set(old) | {PARTIAL_FRONT}:
-        target = out / name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target, ignore_errors=True)
-        else:
-            target.unlink(missing_ok=True)
+    for name in set(old) | {PARTIAL_FRONT}:      # write_run writes files only
+        (out / name).unlink(missing_ok=True)
     atomic_write_text(previous, "\n".join(names) + "\n")
     for name in sorted(names, key=lambda n: n == RESULT):
         os.replace(staging / name, out / name)

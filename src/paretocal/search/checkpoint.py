@@ -93,24 +93,27 @@ class Checkpoint:
         path = Path(self.path)
         if not path.exists():
             return None
+        unreadable = (OSError, ValueError, KeyError, TypeError, AttributeError,
+                      zipfile.BadZipFile)
         try:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
                 arrays = {k: np.array(z[k]) for k in ARRAYS}
-            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-                raise InputError(f"{path}: not a paretocal checkpoint of this version")
-            rng_state = meta["rng"]
-            bit_gen = getattr(np.random, rng_state["bit_generator"])()
-            bit_gen.state = rng_state
-        except InputError:
-            raise
-        except (OSError, ValueError, KeyError, TypeError, AttributeError,
-                zipfile.BadZipFile) as exc:
+        except unreadable as exc:
             raise InputError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})"
                              ) from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise InputError(f"{path}: not a paretocal checkpoint of this version")
         if meta.get("key") != self.key:
             raise InputError(f"{path}: the checkpoint belongs to another run (different data, "
                              "extrinsic or settings); remove it or use another --out")
-        state = LeanState(rng=np.random.Generator(bit_gen), generation=int(meta["generation"]),
-                          evaluations=int(meta["evaluations"]), **arrays)
+        try:
+            bit_gen = getattr(np.random, meta["rng"]["bit_generator"])()
+            bit_gen.state = meta["rng"]
+            state = LeanState(rng=np.random.Generator(bit_gen),
+                              generation=int(meta["generation"]),
+                              evaluations=int(meta["evaluations"]), **arrays)
+        except unreadable as exc:
+            raise InputError(f"{path}: unreadable checkpoint ({type(exc).__name__}: {exc})"
+                             ) from None
         return state, meta["history"]
