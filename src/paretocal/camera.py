@@ -41,6 +41,7 @@ from functools import cached_property
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
+
 from .geometry import transform_points
 
 MODELS = ("pinhole", "fisheye", "mei")

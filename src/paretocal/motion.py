@@ -712,12 +712,12 @@ def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]], ref_times: S
 
 def estimate_motion(  # noqa: PLR0913 - keyword-only options, each documented
         clouds: Sequence[tuple[np.ndarray, np.ndarray]], *,
-                    ref_times: Sequence[float] | None = None, per_frame: bool = False,
-                    initial: Twist | None = None, max_speed: float = 70.0,
-                    up: Sequence[float] = (0.0, 0.0, 1.0), points: int = 15000,
-                    max_passes: int = 10, tol: float = 1e-3, min_share: float = 0.02,
-                    residual_sample: int = 20000, k_normal: int = 12,
-                    seed: int | np.random.Generator | None = 0) -> MotionEstimate:
+        ref_times: Sequence[float] | None = None, per_frame: bool = False,
+        initial: Twist | None = None, max_speed: float = 70.0,
+        up: Sequence[float] = (0.0, 0.0, 1.0), points: int = 15000,
+        max_passes: int = 10, tol: float = 1e-3, min_share: float = 0.02,
+        residual_sample: int = 20000, k_normal: int = 12,
+        seed: int | np.random.Generator | None = 0) -> MotionEstimate:
     """Estimate the ego-motion of a sweep sequence by de-skew-aware scan-to-scan registration.
 
     Parameters

@@ -124,19 +124,19 @@ def _ring_geometry(ring_elevation_deg, n_rings: int, ring_spacing_deg: float | N
 
 def lidar_features(  # noqa: PLR0913 - keyword-only options, each documented
         points: np.ndarray, *, depth_jump_m: float = 1.0, cross_ring: bool = True,
-                   cross_jump_m: float = 0.3, cross_jump_rel: float | None = None,
-                   ground_tol_m: float | None = None,
-                   intensity_jump: float = 0.5, min_range_m: float = 1.5,
-                   max_range_m: float = 70.0, max_gap_deg: float | None = None,
-                   smooth_ratio: float = 1.0, ring_method: str = "auto",
-                   along_fraction: float = 0.5, cross_fraction: float = 0.25,
-                   edge_support: bool = False, edge_contour: bool = False,
-                   rng: np.random.Generator | int | None = 0,
-                   ring: np.ndarray | Rings | None = None,
-                   ring_spacing_deg: float | None = None,
-                   ring_elevation_deg: np.ndarray | None = None,
-                   time: np.ndarray | None = None,
-                   sweep_s: float | None = None, sky_edges: bool = False) -> LidarFeatures:
+        cross_jump_m: float = 0.3, cross_jump_rel: float | None = None,
+        ground_tol_m: float | None = None,
+        intensity_jump: float = 0.5, min_range_m: float = 1.5,
+        max_range_m: float = 70.0, max_gap_deg: float | None = None,
+        smooth_ratio: float = 1.0, ring_method: str = "auto",
+        along_fraction: float = 0.5, cross_fraction: float = 0.25,
+        edge_support: bool = False, edge_contour: bool = False,
+        rng: np.random.Generator | int | None = 0,
+        ring: np.ndarray | Rings | None = None,
+        ring_spacing_deg: float | None = None,
+        ring_elevation_deg: np.ndarray | None = None,
+        time: np.ndarray | None = None,
+        sweep_s: float | None = None, sky_edges: bool = False) -> LidarFeatures:
     """Extract feature points from one sweep.
 
     Parameters
