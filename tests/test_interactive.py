@@ -162,21 +162,21 @@ class TestPage:
 # --- the page in a real browser --------------------------------------------------------------
 
 def _require_browser():
-    """playwright's ``sync_playwright`` and a chromium binary, or a failure saying how to install
-    them (a skip only when PARETOCAL_SKIP_BROWSER=1)."""
-    if os.environ.get("PARETOCAL_SKIP_BROWSER") == "1":
-        pytest.skip("PARETOCAL_SKIP_BROWSER=1: the headless-browser test is disabled")
+    """playwright's ``sync_playwright`` and a chromium binary. Missing either, the test skips with
+    a reason saying how to enable it; with PARETOCAL_REQUIRE_BROWSER=1 (set by .ci/run) it fails
+    instead, so CI always runs it."""
+    required = os.environ.get("PARETOCAL_REQUIRE_BROWSER") == "1"
+    missing = pytest.fail if required else pytest.skip
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
-        pytest.fail("playwright is not installed: `.venv/bin/pip install -e '.[test]'` (or "
-                    "`pip install playwright`); the test drives Debian's chromium, so do not run "
-                    "`playwright install`. Set PARETOCAL_SKIP_BROWSER=1 to skip this test.")
+        missing("playwright is not installed: `.venv/bin/pip install -e '.[test]'` (or "
+                "`pip install playwright`); the test drives Debian's chromium, so "
+                "`playwright install` is not needed")
     if not os.access(CHROMIUM, os.X_OK):
-        pytest.fail(f"chromium not found at {CHROMIUM}: install it with `apt-get install -y "
-                    "--no-install-recommends chromium` (as .ci/run does) or point "
-                    "PARETOCAL_CHROMIUM at a chromium binary. Set PARETOCAL_SKIP_BROWSER=1 to "
-                    "skip this test.")
+        missing(f"chromium not found at {CHROMIUM}: install it with `apt-get install -y "
+                "--no-install-recommends chromium` (as .ci/run does) or point "
+                "PARETOCAL_CHROMIUM at a chromium binary")
     return sync_playwright
 
 
