@@ -201,3 +201,81 @@ def test_resume_refuses_options_that_would_change_the_run(tmp_path, capsys, extr
     assert main(["calibrate", "--resume", str(tmp_path), *extra]) == 2
     err = capsys.readouterr().err
     assert "remove" in err and extra[0] in err and err.count("\n") == 1
+
+
+# --- an interrupt in every phase ----------------------------------------------------------------
+
+def _boom(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+#: (module, function replaced by one that is interrupted, words of the line, search done?)
+PHASES = [
+    ("pipeline", "locate_lidar", "locating the LiDAR", False),
+    ("pipeline", "sweep_rings", "recovering the LiDAR rings", False),
+    ("pipeline", "compensate_motion", "compensating the motion", False),
+    ("pipeline", "Stage", "extracting features", False),
+    ("pipeline", "coarse_seeds", "scoring the seed grid", False),
+    ("pipeline", "polish_front", "polishing the front (after generation 6)", True),
+    ("pipeline", "front_columns", "choosing the solution (after generation 6)", True),
+    ("pipeline", "gather_evidence", "gathering the verdict's evidence (after generation 6)",
+     True),
+    ("rundir", "write_run", "writing the results (after generation 6)", True),
+]
+PHASE_CLI = ["--frames", "0:2", "--pop", "16", "--gens", "6", "--seed", "2", "--no-figures",
+             "--quiet", "--checkpoint-every", "2"]
+
+
+@pytest.mark.parametrize("module, name, words, searched", PHASES,
+                         ids=[p[1] for p in PHASES])
+def test_an_interrupt_in_any_phase_says_where_and_what_to_do(
+        tmp_path, raw_date, capsys, monkeypatch, module, name, words, searched):
+    import importlib
+
+    run = tmp_path / "run"
+    monkeypatch.setattr(importlib.import_module(f"paretocal.{module}"), name, _boom)
+    assert main(["calibrate", str(raw_date), "--out", str(run)] + PHASE_CLI) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"paretocal: interrupted while {words};"), err
+    if searched:
+        assert f"--resume {run}" in err[0] and "partial_front.csv" in err[0]
+        assert {"checkpoint.npz", "partial_front.csv", "run_args.json"} <= set(os.listdir(run))
+        assert not (run / "result.json").exists() and not (run / ".staging").exists()
+    else:
+        assert f"nothing was written to {run}" in err[0]
+        assert not run.exists()
+
+
+def test_interrupted_after_the_search_resumes_to_the_uninterrupted_result(
+        tmp_path, raw_date, monkeypatch):
+    import paretocal.pipeline
+
+    run, ref = tmp_path / "run", tmp_path / "ref"
+    with monkeypatch.context() as m:
+        m.setattr(paretocal.pipeline, "gather_evidence", _boom)
+        assert main(["calibrate", str(raw_date), "--out", str(run)] + PHASE_CLI) == 130
+    assert main(["calibrate", "--resume", str(run), "--quiet"]) == 0
+    assert main(["calibrate", str(raw_date), "--out", str(ref)] + PHASE_CLI) == 0
+    a, b = (json.loads((d / "result.json").read_text()) for d in (run, ref))
+    assert a["T_cam_lidar"] == b["T_cam_lidar"] and a["evaluations"] == b["evaluations"]
+    assert not (run / "partial_front.csv").exists() and not (run / "checkpoint.npz").exists()
+
+
+@pytest.mark.parametrize("delay", [0.4, 1.5, 3.0])
+def test_ctrl_c_at_any_time_prints_one_line_and_no_traceback(tmp_path, raw_date, delay):
+    """SIGINT to a real CLI process while it imports, loads, extracts features or searches,
+    followed by a second one while it saves: exit 130 and one line (two with the second
+    signal's acknowledgement), never a traceback or the interpreter's shutdown noise."""
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "paretocal", "calibrate", str(raw_date), "--out", str(run),
+           "--gens", "3000"] + CLI
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    lines = [ln for ln in err.splitlines() if not ln.startswith("paretocal: stopping")]
+    assert len(lines) == 1 and lines[0].startswith("paretocal: interrupted"), err

@@ -26,15 +26,29 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0"
 
-from .check import check_extrinsic  # noqa: E402
-from .config import Settings, load_settings  # noqa: E402
-from .depth import depth_map, write_depth  # noqa: E402
-from .errors import ParetocalError  # noqa: E402
-from .io import load_frames, read_extrinsic, write_extrinsic  # noqa: E402
-from .report.results import write_run  # noqa: E402
-from .pipeline import CalibrationResult, calibrate  # noqa: E402
-from .rundir import calibrate_run, resume_run  # noqa: E402
-from .study import StudyPlan, run_study  # noqa: E402
+#: Public names and the modules that define them, imported on first use (PEP 562) so that
+#: ``import paretocal.cli`` stays light: the command line answers --help and interrupts at once.
+_LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "config",
+         "depth_map": "depth", "write_depth": "depth", "ParetocalError": "errors",
+         "load_frames": "io", "read_extrinsic": "io", "write_extrinsic": "io",
+         "write_run": "report.results", "CalibrationResult": "pipeline",
+         "calibrate": "pipeline", "calibrate_run": "rundir", "resume_run": "rundir",
+         "StudyPlan": "study", "run_study": "study"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
            "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "load_frames", "load_settings",

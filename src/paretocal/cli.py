@@ -236,8 +236,8 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                      checkpoint_every: int, strict: bool = False, resume: bool = False) -> None:
     """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
     where the partial front and the checkpoint are, and exit 130."""
-    from .rundir import PARTIAL_FRONT, calibrate_run, resume_run
-    from .search.checkpoint import SearchInterrupted
+    from .errors import Interrupted
+    from .rundir import calibrate_run, resume_run
 
     interactive = sys.stderr.isatty() and not quiet
     try:
@@ -248,11 +248,8 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                 result = calibrate_run(source, out, T_init, settings, frames=loaded,
                                        figures=figures, checkpoint_every=checkpoint_every,
                                        progress=progress)
-    except SearchInterrupted as exc:
-        where = (f"checkpoint kept in {exc.checkpoint}; continue with: paretocal calibrate "
-                 f"--resume {out}" if exc.checkpoint else "no checkpoint (--checkpoint-every 0)")
-        print(f"paretocal: interrupted after generation {exc.generation}; wrote "
-              f"{out / PARTIAL_FRONT}; {where}", file=sys.stderr)
+    except Interrupted as exc:
+        _report(interrupted_line(exc, out))
         raise typer.Exit(130) from None
     ref = result.reference_error
     typer.echo(f"paretocal: {len(result.frames)} frames, {result.evaluations} evaluations in "
@@ -268,6 +265,24 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     typer.echo(verdict_line(result.reliability))
     if strict and result.reliability["verdict"] != "ok":
         raise typer.Exit(STRICT_EXIT)
+
+
+def interrupted_line(exc, out: Path) -> str:
+    """The one line an interrupted calibration prints: where it stopped, what it wrote and how
+    to continue (``exc`` is a :class:`~paretocal.errors.Interrupted`)."""
+    from .rundir import PARTIAL_FRONT
+
+    where = exc.phase + (f" (after generation {exc.generation})"
+                         if exc.generation is not None else "")
+    wrote = f"wrote {out / PARTIAL_FRONT}; " if exc.X is not None else ""
+    if exc.checkpoint is not None:
+        then = (f"the search state is kept in {exc.checkpoint}; continue with: "
+                f"paretocal calibrate --resume {out}")
+    elif exc.X is not None:
+        then = "no checkpoint (--checkpoint-every 0): run the command again to finish"
+    else:
+        then = f"nothing was written to {out}; run the same command again"
+    return f"paretocal: interrupted while {where}; {wrote}{then}"
 
 
 #: Exit status of ``calibrate --strict`` for a result judged unreliable.
@@ -499,31 +514,78 @@ _USAGE_ERRORS = tuple({click.ClickException,
                        getattr(typer.exceptions, "TyperException", click.ClickException)})
 
 
+#: What an interrupted command leaves behind, when the command has not said it itself
+#: (calibrate and batch say more once their work has started).
+_INTERRUPTED = {
+    "calibrate": "interrupted before the run started; nothing was written; run the same "
+                 "command again",
+    "check": "interrupted; nothing was written; run the same command again",
+    "perturb": "interrupted; nothing was written; run the same command again",
+    "depth": "interrupted; the depth maps already in --out are whole files, the others are "
+             "missing; run the same command again",
+    "study": "interrupted; the study is incomplete (no report.html); run the same command again",
+}
+
+
+class _Stop:
+    """SIGINT and SIGTERM handler: the first signal raises KeyboardInterrupt (the run stops and
+    saves what it has); later ones only say so, so that saving is not cut short."""
+
+    def __init__(self):
+        self.signals = 0
+        self.reported = False
+
+    def __call__(self, signum, frame):
+        self.signals += 1
+        if self.signals == 1:
+            raise KeyboardInterrupt
+        import os
+
+        os.write(2, b"paretocal: stopping, saving what the run has (kill -9 to abort at once)\n")
+
+
+_STOP = _Stop()
+
+
+def _report(line: str) -> None:
+    """Print the one line that says how an interrupted command ended."""
+    print(line, file=sys.stderr)
+    _STOP.reported = True
+
+
+def _interrupted(command: str | None) -> int:
+    if not _STOP.reported:
+        _report(f"paretocal: {_INTERRUPTED.get(command, 'interrupted; run the command again')}")
+    return 130
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status."""
-    args = sys.argv[1:] if argv is None else list(argv)
-    verbose = "--verbose" in args or "-v" in args
-    command = typer.main.get_command(app)
     import signal
     import threading
 
-    def _terminate(signum, frame):
-        raise KeyboardInterrupt
-
+    args = sys.argv[1:] if argv is None else list(argv)
+    verbose = "--verbose" in args or "-v" in args
+    name = next((a for a in args if not a.startswith("-")), None)
+    _STOP.signals, _STOP.reported = 0, False
     # SIGTERM stops a run the way Ctrl-C does: checkpoint kept, partial front written.
     main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    # A signal ignored when the process started (a background job of a shell, nohup) stays
+    # ignored, as Python itself does for SIGINT.
+    previous = ({sig: signal.signal(sig, _STOP) for sig in (signal.SIGINT, signal.SIGTERM)
+                 if signal.getsignal(sig) is not signal.SIG_IGN} if main_thread else {})
     try:
+        command = typer.main.get_command(app)
         rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
-        return int(rv) if isinstance(rv, int) else 0
+        # typer turns KeyboardInterrupt into exit status 130 itself.
+        return _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
     except ParetocalError as exc:
         print(f"paretocal: error: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, typer.Abort, click.exceptions.Abort):
-        print("paretocal: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(name)
     except (typer.Exit, click.exceptions.Exit) as exc:
-        return int(exc.exit_code)
+        return _interrupted(name) if exc.exit_code == 130 else int(exc.exit_code)
     except _USAGE_ERRORS as exc:
         # A usage error from the option parser (unknown option, bad value, ...).
         text = exc.format_message() if hasattr(exc, "format_message") else str(exc)
@@ -538,12 +600,8 @@ def main(argv: list[str] | None = None) -> int:
               "(rerun with --verbose for the traceback)", file=sys.stderr)
         return 1
     finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, previous)
-
-
-def _console() -> None:  # pragma: no cover
-    sys.exit(main())
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -21,3 +21,29 @@ class SettingsError(ParetocalError):
 
 class DegenerateSceneError(ParetocalError):
     """The frames hold too little information to calibrate (no edges, no points in view)."""
+
+
+class Interrupted(Exception):
+    """A run stopped on SIGINT (or SIGTERM turned into one) and says where.
+
+    Not a :class:`ParetocalError`: nothing was wrong with the input. The CLI prints one line
+    from it and exits 130.
+
+    Attributes
+    ----------
+    phase : str
+        What the run was doing, in words ("extracting features", "the search", ...).
+    generation : int or None
+        The last completed generation of the search, when the search had started.
+    X, F : ndarray or None
+        The best front known when it stopped, shapes (k, 7) and (k, 2): the search's
+        non-dominated set once the search has run.
+    checkpoint : path or None
+        The saved search state a resume continues from, when there is one.
+    """
+
+    def __init__(self, phase: str, generation: int | None = None, X=None, F=None,
+                 checkpoint=None):
+        super().__init__(f"interrupted while {phase}")
+        self.phase, self.generation = phase, generation
+        self.X, self.F, self.checkpoint = X, F, checkpoint

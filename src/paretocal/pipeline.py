@@ -15,7 +15,7 @@ import numpy as np
 
 from .config import Settings
 from .decide import decide, reprojection_deviation
-from .errors import InputError, SettingsError
+from .errors import InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
 from .geometry import pose_error
 from .io.frame import Frame
@@ -80,19 +80,25 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         warn_rings(frames, rings)
         _check_budget(stage, settings.decision)
     res, seeds = _search(stage, frames, T_init, settings, checkpoint, report, timings)
-    stage, X, F, basin, evaluations = _refine(stage, res, frames, rings, T_init, settings,
-                                              progress, timings)
-    T, columns, costs, best = front_columns(stage, X, F, T_init, T_ref, settings)
-    d = settings.decision
-    i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
-                         d.max_deviation_px)
-    decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                     "polished": bool(d.refine), "best_supported_n": int(round(X[best, 6])),
-                     "basin": basin})
-    quality = quality_report(stage.objective, X[i])
-    with _timed(timings, "verdict"):
-        evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max, X[i],
-                                   quality)
+    try:
+        stage, X, F, basin, evaluations = _refine(stage, res, frames, rings, T_init, settings,
+                                                  progress, timings)
+        with _timed(timings, "decision"):
+            T, columns, costs, best = front_columns(stage, X, F, T_init, T_ref, settings)
+            d = settings.decision
+            i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
+                                 d.max_deviation_px)
+            decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
+                             "polished": bool(d.refine),
+                             "best_supported_n": int(round(X[best, 6])), "basin": basin})
+            quality = quality_report(stage.objective, X[i])
+        with _timed(timings, "verdict"):
+            evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
+                                       X[i], quality)
+    except Interrupted as exc:
+        # The search is complete (and checkpointed): its front is what the run has to show.
+        exc.X, exc.F, exc.generation = res.X, res.F, res.generations
+        raise
     timings["total"] = wall = time.perf_counter() - t_start
     result = CalibrationResult(
         T_cam_lidar=T[i], T_init=T_init, T_ref=T_ref, chosen=i,
@@ -109,12 +115,23 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     return result
 
 
+#: What the run is doing during each timed phase, for the line an interrupt prints.
+PHASES = {"load": "loading the frames", "lidar_pose": "locating the LiDAR",
+          "rings": "recovering the LiDAR rings", "motion": "compensating the motion",
+          "features": "extracting features", "seed_grid": "scoring the seed grid",
+          "polish": "polishing the front", "reselect": "re-selecting the points at the estimate",
+          "decision": "choosing the solution", "verdict": "gathering the verdict's evidence"}
+
+
 @contextmanager
 def _timed(timings: dict[str, float], name: str):
-    """Add the wall time of the block to ``timings[name]`` (s)."""
+    """Add the wall time of the block to ``timings[name]`` (s); an interrupt in the block
+    becomes :class:`~paretocal.errors.Interrupted` naming the phase."""
     t0 = time.perf_counter()
     try:
         yield
+    except KeyboardInterrupt:
+        raise Interrupted(PHASES[name]) from None
     finally:
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 

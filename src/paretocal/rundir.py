@@ -32,14 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from .config import Settings, settings_from_mapping
-from .errors import ParetocalError
+from .errors import Interrupted, ParetocalError
 from .io import load_frames
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
 from .pipeline import calibrate
 from .report.results import partial_front_csv, write_run
 from .result import CalibrationResult
-from .search.checkpoint import Checkpoint, SearchInterrupted
+from .search.checkpoint import Checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -147,13 +147,19 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
 
     Raises
     ------
-    SearchInterrupted
-        On an interrupt during the search, after writing ``partial_front.csv``.
+    paretocal.errors.Interrupted
+        On an interrupt (SIGINT, or SIGTERM turned into one by the caller) in any phase, naming
+        it; once the search has produced a front, ``partial_front.csv`` is written first, and
+        ``checkpoint`` is set when the run can be resumed (``SearchInterrupted`` during the
+        search itself).
     """
     settings = settings or Settings()
     out = Path(out)
     if frames is None:
-        frames = load_frames(source, settings.frames, settings.camera)
+        try:
+            frames = load_frames(source, settings.frames, settings.camera)
+        except KeyboardInterrupt:
+            raise Interrupted("loading the frames") from None
     with locked(out):
         ckpt = None
         if checkpoint_every > 0:
@@ -163,9 +169,20 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
                 "settings": settings.to_dict(), "figures": bool(figures)})
         try:
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt)
-            publish_run(result, out, result.sweeps or frames, figures=figures)
-        except SearchInterrupted as exc:
-            atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
+            try:
+                publish_run(result, out, result.sweeps or frames, figures=figures)
+            except KeyboardInterrupt:
+                shutil.rmtree(out / STAGING, ignore_errors=True)
+                raise Interrupted("writing the results", result.history[-1]["gen"],
+                                  result.nsga_front[0], result.nsga_front[1]) from None
+        except Interrupted as exc:
+            if exc.X is not None:
+                atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
+            # Resumable when the search state and the run's arguments are on disk (an
+            # interrupt before the first checkpoint leaves the folder as it was).
+            on_disk = (ckpt is not None and Path(ckpt.path).is_file()
+                       and (out / RUN_ARGS).is_file())
+            exc.checkpoint = Path(ckpt.path) if on_disk else None
             raise
         if ckpt is not None:
             # A finished run needs no checkpoint; its arguments stay as a record.

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, Interrupted
 from ..io.atomic import atomic_path
 
 FORMAT = 2
@@ -42,16 +42,16 @@ def fingerprint(*parts) -> str:
     return h.hexdigest()
 
 
-class SearchInterrupted(Exception):
+class SearchInterrupted(Interrupted):
     """The search stopped on SIGINT/SIGTERM after saving its checkpoint.
 
-    Attributes: ``X`` (k, 7) and ``F`` (k, 2), the non-dominated set of the last completed
-    generation; ``generation``; ``checkpoint`` (its path, or None).
+    Attributes (of :class:`~paretocal.errors.Interrupted`): ``X`` (k, 7) and ``F`` (k, 2), the
+    non-dominated set of the last completed generation; ``generation``; ``checkpoint`` (its
+    path, or None).
     """
 
     def __init__(self, X: np.ndarray, F: np.ndarray, generation: int, checkpoint: Path | None):
-        super().__init__(f"search interrupted after generation {generation}")
-        self.X, self.F, self.generation, self.checkpoint = X, F, generation, checkpoint
+        super().__init__("the search", generation, X, F, checkpoint)
 
 
 @dataclass
