@@ -20,6 +20,7 @@ RANKS = {
     "report": 9,
     "study": 10, "batch": 10, "rundir": 10,
     "cli": 11, "__init__": 11,
+    "__main__": 12,
 }
 
 ROOT = Path(paretocal.__file__).parent
