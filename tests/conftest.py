@@ -12,6 +12,15 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config):
+    """Measured cost models are kept in a folder of this test session, not the user's cache
+    (subprocesses of the CLI inherit it)."""
+    import tempfile
+
+    if "PARETOCAL_CACHE_DIR" not in os.environ:
+        os.environ["PARETOCAL_CACHE_DIR"] = tempfile.mkdtemp(prefix="paretocal-cache-")
+
+
 def data_dir() -> Path:
     """``$PARETOCAL_DATA`` or ``../shared/data`` beside the project (the documented default)."""
     return Path(os.environ.get("PARETOCAL_DATA", ROOT.parent / "shared" / "data")).resolve()

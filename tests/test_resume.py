@@ -279,3 +279,70 @@ def test_ctrl_c_at_any_time_prints_one_line_and_no_traceback(tmp_path, raw_date,
     assert "Traceback" not in err and "Exception ignored" not in err, err
     lines = [ln for ln in err.splitlines() if not ln.startswith("paretocal: stopping")]
     assert len(lines) == 1 and lines[0].startswith("paretocal: interrupted"), err
+
+
+# --- a reproducible --budget-ms ------------------------------------------------------------------
+
+def _timing(monkeypatch, ms_per_point):
+    """The machine's timing, as the cost model measures it, fixed (a busier machine: larger)."""
+    import paretocal.stage
+
+    real = paretocal.stage.measure_cost_model
+
+    def measure(*args, **kwargs):
+        return dataclasses.replace(real(*args, **kwargs), ms_fixed=0.0, ms_per_point=ms_per_point)
+    monkeypatch.setattr(paretocal.stage, "measure_cost_model", measure)
+
+
+BUDGET = SMALL.replace(decision={"rule": "budget", "budget_ms": 0.02})
+
+
+def test_the_budget_decision_does_not_follow_the_load(tmp_path, start, monkeypatch):
+    """The second run measures three times slower timings (a loaded machine); it decides with
+    the model the first run measured on this machine, so it chooses the same solution. Without
+    the kept model the choice moves, so the test can tell."""
+    frames, T = start
+    monkeypatch.setenv("PARETOCAL_CACHE_DIR", str(tmp_path / "cache"))
+    _timing(monkeypatch, 1e-5)
+    first = calibrate(frames, T, BUDGET)
+    assert first.cost_model.probe["source"] == "measured"
+    _timing(monkeypatch, 3e-5)
+    again = calibrate(frames, T, BUDGET)
+    assert again.cost_model.probe["source"].startswith("cache ")
+    assert again.n_points == first.n_points and again.cost_model.ms_per_point == 1e-5
+    np.testing.assert_array_equal(again.T_cam_lidar, first.T_cam_lidar)
+    monkeypatch.setenv("PARETOCAL_CACHE_DIR", "")             # no cache: measured afresh
+    loaded = calibrate(frames, T, BUDGET)
+    assert loaded.cost_model.ms_per_point == 3e-5 and loaded.n_points < first.n_points
+
+
+def test_a_resumed_run_decides_with_the_interrupted_runs_cost_model(tmp_path, start,
+                                                                    monkeypatch):
+    frames, T = start
+    monkeypatch.setenv("PARETOCAL_CACHE_DIR", "")
+    _timing(monkeypatch, 1e-5)
+    whole = calibrate(frames, T, BUDGET)
+    ck = Checkpoint(tmp_path / "ck.npz", every=3)
+    with pytest.raises(SearchInterrupted):
+        calibrate(frames, T, BUDGET, progress=_stop_at(7), checkpoint=ck)
+    _timing(monkeypatch, 3e-5)                  # the resume runs on a busier machine
+    resumed = calibrate(frames, T, BUDGET, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))
+    assert resumed.cost_model.probe["source"].startswith("checkpoint ")
+    assert resumed.n_points == whole.n_points
+    np.testing.assert_array_equal(resumed.T_cam_lidar, whole.T_cam_lidar)
+
+
+def test_decision_settings_keep_the_checkpoint_valid(tmp_path, start, caplog):
+    """Only the decision changes (knee -> budget): the search resumes from the checkpoint
+    instead of refusing it as another run's."""
+    frames, T = start
+    ck = Checkpoint(tmp_path / "ck.npz", every=3)
+    with pytest.raises(SearchInterrupted):
+        calibrate(frames, T, SMALL, progress=_stop_at(7), checkpoint=ck)
+    with caplog.at_level("INFO", logger="paretocal"):
+        r = calibrate(frames, T, BUDGET, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))
+    assert "resuming the search at generation 7" in caplog.text
+    assert r.decision["rule"] == "budget"
+    changed = SMALL.replace(search={"seed": 4})           # the search's own settings still do
+    with pytest.raises(InputError, match="another run"):
+        calibrate(frames, T, changed, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))

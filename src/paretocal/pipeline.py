@@ -26,6 +26,8 @@ from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
 from .inputs import (compensate_motion, locate_lidar, resolve_init, sweep_rings,  # noqa: F401
                      warn_rings, warn_unlocated, describe_inputs)
+from .objective import get_evaluator
+from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
 from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
                     holdout_score, n_range, prepare_features)
@@ -75,7 +77,12 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     with _timed(timings, "motion"):
         frames, motion_info = compensate_motion(frames, settings)
     with _timed(timings, "features"):
-        stage = Stage(frames, T_init, T_init, settings, report("features"), rings)
+        # A resumed run decides with the cost model the interrupted run measured.
+        stored = checkpoint.stored_cost_model() if checkpoint is not None else None
+        stage = Stage(frames, T_init, T_init, settings, report("features"), rings,
+                      CostModel(**dict(stored, probe=dict(
+                          stored["probe"], source=f"checkpoint {checkpoint.path}")))
+                      if stored else None)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
         _check_budget(stage, settings.decision)
@@ -91,6 +98,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
                              "polished": bool(d.refine),
                              "best_supported_n": int(round(X[best, 6])), "basin": basin})
+            # The model decides (reproducibly); the time measured now is reported beside it.
+            decision["measured_ms"] = time_per_candidate(
+                stage.scene, get_evaluator(settings.objective.evaluator), T[i],
+                decision["n_points"])
             quality = quality_report(stage.objective, X[i])
         with _timed(timings, "verdict"):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
@@ -171,8 +182,12 @@ def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Set
             seeds = coarse_seeds(stage.feats, T_init, settings.search, settings.objective,
                                  settings.features.z_min, stage.cost, stage.n_max)
     if checkpoint is not None:
+        # Everything the search depends on; the decision's settings are not (a checkpoint
+        # stays valid when only --rule or --budget-ms change).
+        searched = {k: v for k, v in settings.to_dict().items() if k != "decision"}
+        checkpoint.cost_model = stage.cost.to_dict()
         checkpoint.key = fingerprint(
-            settings.to_dict(), T_init, stage.n_min, stage.n_max,
+            searched, T_init, stage.n_min, stage.n_max,
             [(f.name, len(f.points), list(f.image.shape)) for f in frames],
             seeds if seeds is not None else np.zeros(0))
     res = run_nsga2(stage.objective, settings.search, stage.n_min, stage.n_max,
@@ -207,7 +222,7 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
         # objective, and that bias grows with the initial error.
         with _timed(timings, "reselect"):
             T_est = stage.objective.transforms(X[np.argmin(F[:, 0])][None])[0]
-            stage = Stage(frames, T_est, T_init, settings, rings=rings)
+            stage = Stage(frames, T_est, T_init, settings, rings=rings, cost=stage.cost)
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective

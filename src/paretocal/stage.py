@@ -3,7 +3,10 @@ the scene, the range of ``n``, the measured cost model, and :class:`Stage` holdi
 
 from __future__ import annotations
 
+import json
 import logging
+import os
+from pathlib import Path
 
 import numpy as np
 
@@ -12,9 +15,11 @@ from .errors import DegenerateSceneError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
 from .features.rings import Rings
+from .io.atomic import atomic_write_text
 from .io.frame import Frame
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
+from .search.checkpoint import fingerprint
 from .verdict import MIN_POINTS_PER_FRAME
 
 log = logging.getLogger(__name__)
@@ -127,8 +132,10 @@ class Stage:
 
     Parameters: the frames, ``T_view`` (the pose the feature points are chosen at: those in
     view, plus a margin), ``T_init`` (the objective's corrections are relative to it), the
-    settings, an optional ``progress(done, total)`` and the sweeps' rings (from
-    :func:`paretocal.inputs.sweep_rings`).
+    settings, an optional ``progress(done, total)``, the sweeps' rings (from
+    :func:`paretocal.inputs.sweep_rings`) and an optional cost model whose time line is reused
+    (a checkpoint's, or the first stage's when the points are chosen again); without one the
+    line comes from :func:`cost_model`.
 
     Attributes: ``feats`` (search part of each frame's features), ``scene``, ``holdout``
     (held-out scene or None), ``n_min``, ``n_max``, ``cost`` (the measured cost model) and
@@ -136,7 +143,8 @@ class Stage:
     """
 
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
-                 settings: Settings, progress=None, rings: list[Rings] | None = None):
+                 settings: Settings, progress=None, rings: list[Rings] | None = None,
+                 cost: CostModel | None = None):
         feats_all = prepare_features(frames, T_view, settings, progress, rings)
         check_scene(feats_all, frames, T_view, settings.features.z_min)
         o, z_min = settings.objective, settings.features.z_min
@@ -146,11 +154,83 @@ class Stage:
         self.holdout = (build_scene([p[1] for p in parts], z_min, o.outside)
                         if o.holdout > 0 else None)
         self.n_min, self.n_max = n_range(settings.search, self.scene.points_per_frame)
-        self.cost = measure_cost_model(self.scene, get_evaluator(o.evaluator), T_view,
-                                       self.n_min, self.n_max)
+        self.cost = (cost.for_scene(self.scene, self.n_min, self.n_max) if cost is not None
+                     else cost_model(self.scene, o.evaluator, T_view, self.n_min, self.n_max))
         self.objective = CalibrationObjective(self.scene, T_init, o, self.cost,
                                               [f.image.edge_uv for f in self.feats],
                                               ucb_k=settings.ucb_k)
+
+
+def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int) -> CostModel:
+    """The cost model of ``scene`` on this machine: measured once, then read from a cache.
+
+    Timing varies with the machine's load, and the budget rule chooses by the modelled time, so
+    a model measured afresh on every run would make ``--budget-ms`` choose differently from run
+    to run. The first measurement of a scene (same frames, view and ``n`` range) with an
+    evaluator on a machine is therefore kept in ``cost-<key>.json`` under
+    :func:`cache_dir` and used by later runs; ``probe["source"]`` records which it was.
+    """
+    evaluate = get_evaluator(evaluator)
+    folder = cache_dir()
+    key = fingerprint(_machine(evaluate), np.round(T_view, 6), scene.n_frames,
+                      scene.nbytes_static, n_min, n_max,
+                      [int(scene.points_used(n)) for n in
+                       np.unique(np.linspace(n_min, n_max, 5).round().astype(np.int64))])
+    path = folder / f"cost-{key[:20]}.json" if folder is not None else None
+    if path is not None and path.is_file():
+        try:
+            line = CostModel(**json.loads(path.read_text(encoding="utf-8")))
+            return line.for_scene(scene, n_min, n_max, source=f"cache {path}")
+        except (OSError, ValueError, TypeError) as exc:
+            log.info("%s: unreadable cost model (%s); measuring again", path, exc)
+    cost = measure_cost_model(scene, evaluate, T_view, n_min, n_max)
+    if cost.ms_per_point <= 1e-9:
+        # The fit found no time per point (it was clamped): the measurement failed, so it is
+        # not kept for later runs.
+        log.warning("the evaluation time did not grow with the number of points (%s ms at %s "
+                    "points): the cost model is unreliable on this machine now",
+                    cost.probe["ms"], cost.probe["points"])
+    elif path is not None:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(path, json.dumps(cost.to_dict()) + "\n")
+        except OSError as exc:  # a read-only home: the run goes on with its measurement
+            log.info("%s: cannot keep the cost model (%s)", path, exc)
+    return cost
+
+
+def cache_dir() -> Path | None:
+    """Where measured cost models are kept: ``$PARETOCAL_CACHE_DIR`` (empty: nowhere, every
+    run measures), else ``$XDG_CACHE_HOME/paretocal``, else ``~/.cache/paretocal``."""
+    given = os.environ.get("PARETOCAL_CACHE_DIR")
+    if given is not None:
+        return Path(given) if given.strip() else None
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "paretocal"
+
+
+def _machine(evaluate) -> dict:
+    """What the time of an evaluation depends on besides the scene."""
+    import platform
+
+    from . import __version__
+
+    cpu = platform.processor()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")),
+                       cpu)
+    except OSError:
+        pass
+    threads = None
+    try:
+        import numba
+
+        threads = numba.get_num_threads()
+    except Exception:  # noqa: BLE001 - no numba: the numpy evaluator
+        pass
+    return {"version": __version__, "evaluator": f"{evaluate.__module__}.{evaluate.__name__}",
+            "node": platform.node(), "cpu": cpu, "cpus": os.cpu_count(), "threads": threads}
 
 
 def n_range(search: SearchSettings, points_per_frame: np.ndarray) -> tuple[int, int]:

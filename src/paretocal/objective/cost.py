@@ -1,16 +1,18 @@
 """The second objective: what evaluating a calibration with ``n`` points costs.
 
-Default (``model``): a cost model measured once at start-up on this machine. The evaluator is
-timed on a probe population at several ``n`` (median of repeats) and a line is fitted,
-``time = a + b * P`` ms per candidate, where ``P`` is the number of points evaluated over all
-frames; the bytes an evaluation reads are counted from the arrays it touches,
-``bytes = DT bytes + 17 * P`` (three float32 coordinates, a float32 weight and a group byte
-per point). Both are
-min-max normalised over the search's ``n`` range and summed, ``f2 = t_norm + m_norm`` in [0, 2].
+Default (``model``): a cost model measured on this machine. The evaluator is timed on a probe
+population at several ``n``, in CPU time on one core (:func:`time_per_candidate`; the fastest
+of repeats, as noise only ever adds time) and a line is fitted, ``time = a + b * P`` ms per
+candidate, where ``P`` is the number of points evaluated over all frames; the bytes an
+evaluation reads are counted from the arrays it touches, ``bytes = DT bytes + 17 * P`` (three
+float32 coordinates, a float32 weight and a group byte per point). Both are min-max normalised
+over the search's ``n`` range and summed, ``f2 = t_norm + m_norm`` in [0, 2].
 
 Because both parts are affine in ``P``, the normalised cost is the same function of ``n`` on
 every machine, so the search stays deterministic for a seed; the measured line supplies the
-absolute milliseconds and bytes reported beside it and used by ``--budget-ms``.
+absolute milliseconds and bytes reported beside it and used by ``--budget-ms``. Where the line
+comes from (measured, a cache of an earlier measurement, a checkpoint) is the stage's concern
+(:func:`paretocal.stage.cost_model`).
 
 Option ``psutil`` is the paper's approach: every candidate is timed (3 repetitions) and its
 resident-memory growth read with psutil. It is reproduced faithfully but is noisy (tens of
@@ -25,6 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .kernel import one_thread
 from .scene import Scene
 
 BYTES_PER_POINT = 17  # x, y, z, weight float32 + group int8
@@ -73,6 +76,24 @@ class CostModel:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def for_scene(self, scene: Scene, n_min: int, n_max: int, source: str | None = None
+                  ) -> "CostModel":
+        """This model's time line applied to another scene of the same frames (the feature
+        points chosen again at another pose): the time per point and per candidate belong to
+        the machine and the evaluator, the bytes and the normalisation range to the scene.
+        ``source`` (where the line comes from) is recorded in ``probe["source"]``."""
+        probe = dict(self.probe, **({"source": source} if source else {}))
+        return CostModel(ms_fixed=self.ms_fixed, ms_per_point=self.ms_per_point,
+                         bytes_fixed=_bytes_fixed(scene), bytes_per_point=float(BYTES_PER_POINT),
+                         points_min=int(scene.points_used(n_min)),
+                         points_max=int(scene.points_used(n_max)), probe=probe)
+
+
+def _bytes_fixed(scene: Scene) -> float:
+    """Bytes every evaluation reads whatever ``n``: the distance transforms and one 3x4
+    extrinsic per frame (float64)."""
+    return float(scene.nbytes_static + scene.n_frames * 12 * 8)
+
 
 def measure_cost_model(scene: Scene, evaluator, T_probe: np.ndarray, n_min: int, n_max: int,
                        candidates: int = 64, repeats: int = 5) -> CostModel:
@@ -88,19 +109,10 @@ def measure_cost_model(scene: Scene, evaluator, T_probe: np.ndarray, n_min: int,
     n_min, n_max : int
         The search's range of points per frame.
     """
-    T = np.repeat(np.asarray(T_probe, dtype=np.float64)[None], candidates, 0)
     ns = np.unique(np.linspace(n_min, n_max, 5).round().astype(np.int64))
-    evaluator(scene, T, np.full(candidates, ns[-1]))          # warm-up (and JIT compile)
-    pts, ms = [], []
-    for n in ns:
-        nn = np.full(candidates, n)
-        samples = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            evaluator(scene, T, nn)
-            samples.append(time.perf_counter() - t0)
-        pts.append(int(scene.points_used(n)))
-        ms.append(1e3 * float(np.median(samples)) / candidates)
+    time_per_candidate(scene, evaluator, T_probe, ns[-1], candidates, 1)  # warm-up (JIT)
+    pts = [int(scene.points_used(n)) for n in ns]
+    ms = [time_per_candidate(scene, evaluator, T_probe, n, candidates, repeats) for n in ns]
     pts_a, ms_a = np.array(pts, dtype=np.float64), np.array(ms)
     if len(pts_a) > 1 and np.ptp(pts_a) > 0:
         slope, icpt = np.polyfit(pts_a, ms_a, 1)
@@ -110,11 +122,31 @@ def measure_cost_model(scene: Scene, evaluator, T_probe: np.ndarray, n_min: int,
     slope = max(float(slope), 1e-9)
     icpt = max(float(icpt), 0.0)
     return CostModel(ms_fixed=icpt, ms_per_point=slope,
-                     bytes_fixed=float(scene.nbytes_static + scene.n_frames * 12 * 8),
+                     bytes_fixed=_bytes_fixed(scene),
                      bytes_per_point=float(BYTES_PER_POINT),
                      points_min=int(scene.points_used(n_min)),
                      points_max=int(scene.points_used(n_max)),
-                     probe={"points": pts, "ms": [round(v, 6) for v in ms]})
+                     probe={"points": pts, "ms": [round(v, 6) for v in ms], "source": "measured"})
+
+
+def time_per_candidate(scene: Scene, evaluator, T: np.ndarray, n: int, candidates: int = 64,
+                       repeats: int = 5) -> float:
+    """CPU milliseconds ``evaluator`` takes per candidate on one core, for ``candidates``
+    copies of the extrinsic ``T`` (4, 4) at ``n`` points per frame: the fastest of
+    ``repeats`` batches.
+
+    One core and the thread's CPU clock make the figure a property of the machine and the
+    scene, not of the load: on two busy cores a parallel batch's wall time was 5-30 times its
+    work (threads waiting for each other's time slices), flat in ``n``."""
+    Tb = np.repeat(np.asarray(T, dtype=np.float64)[None], candidates, 0)
+    nn = np.full(candidates, int(n))
+    samples = []
+    with one_thread():
+        for _ in range(repeats):
+            t0 = time.thread_time()
+            evaluator(scene, Tb, nn)
+            samples.append(time.thread_time() - t0)
+    return 1e3 * float(np.min(samples)) / candidates
 
 
 def measure_per_candidate(evaluate_one, count: int, repeats: int = 3) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,8 @@ oracle that measures exact distances to the edge pixels.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..camera import (FISHEYE, MEI, P_CX, P_CY, P_FX, P_FY, P_K1, P_LIMIT, P_MODEL, P_P1, P_P2,
@@ -442,6 +444,21 @@ def get_evaluator(name: str = "auto"):
             raise RuntimeError("numba is not available; use --evaluator numpy")
         return sums_numba
     raise ValueError(f"unknown evaluator {name!r}")
+
+
+@contextmanager
+def one_thread():
+    """Evaluations in the block run on the calling thread alone (numba's thread count is a
+    per-thread setting, restored on leaving)."""
+    if not HAVE_NUMBA:  # pragma: no cover
+        yield
+        return
+    k = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(k)
 
 
 def set_threads(k: int | None) -> None:

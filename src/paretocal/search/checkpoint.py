@@ -66,16 +66,31 @@ class Checkpoint:
         Save after every ``every`` generations (and when interrupted).
     key : str
         Fingerprint of the run; set by the pipeline before the search starts.
+    cost_model : dict, optional
+        The run's cost model, saved with the state (set by the pipeline).
     """
 
     path: Path
     every: int = 5
     key: str = ""
+    cost_model: dict | None = None
+
+    def stored_cost_model(self) -> dict | None:
+        """The cost model saved with the state (``CostModel.to_dict()``), so that a resumed
+        run decides with the times the interrupted one measured; None when there is none. The
+        run's fingerprint is checked by :meth:`load`, not here."""
+        try:
+            with np.load(Path(self.path), allow_pickle=False) as z:
+                found = json.loads(str(z["meta"])).get("cost_model")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile):
+            return None
+        return found if isinstance(found, dict) else None
 
     def save(self, state, history: list) -> None:
         meta = {"format": FORMAT, "key": self.key, "generation": int(state.generation),
                 "evaluations": int(state.evaluations),
-                "rng": state.rng.bit_generator.state, "history": history}
+                "rng": state.rng.bit_generator.state, "history": history,
+                "cost_model": self.cost_model}
         arrays = {k: np.asarray(getattr(state, k)) for k in ARRAYS}
         with atomic_path(Path(self.path)) as tmp:
             with open(tmp, "wb") as fh:
