@@ -3,6 +3,7 @@ the chosen extrinsic (KITTI calib_velo_to_cam.txt, ROS tf_static.yaml, extrinsic
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 from types import SimpleNamespace
@@ -18,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from paretocal.camera import Camera, project
 from paretocal.errors import InputError
 from paretocal.geometry import apply_correction, invert
-from paretocal.io import detect_source, load_frames, read_extrinsic
+from paretocal.io import detect_source, load_frames, read_extrinsic, write_extrinsic
 from paretocal.io.exports import (INVERSE_FILE, KITTI_FILE, TF_FILE, kitti_rect_of,
                                   read_extrinsic_inverse, read_kitti_velo_to_cam, read_tf_static,
                                   write_exports)
@@ -466,6 +467,39 @@ class TestCameraInfo:
         np.testing.assert_array_equal(images[2], images[0])
         np.testing.assert_array_equal(images[0], f[0].image)      # used as taken
 
+    @pytest.mark.parametrize("form", ["ros1", "ros2", "P only", "file"])
+    def test_the_message_form(self, tmp_path, raw_frames, form):
+        """sensor_msgs/CameraInfo as rostopic / ros2 topic echo print it: flat K, D, P."""
+        f = raw_frames[0]
+        K = [float(v) for v in f.camera.K.ravel()]
+        P = [float(v) for v in np.column_stack([f.camera.K, np.zeros(3)]).ravel()]
+        msg = {"height": f.camera.height, "width": f.camera.width,
+               "distortion_model": "plumb_bob", "D": self.D, "K": K, "R": np.eye(3).ravel().tolist(),
+               "P": P}
+        if form == "ros2":
+            msg = {k.lower(): v for k, v in msg.items()}
+        if form == "P only":
+            msg["K"] = [0.0] * 9
+        extra = {"camera_info": "cam.yaml"} if form == "file" else {}
+        root = generic_folder(tmp_path / "rig", [f], write_points_bin,
+                              camera=None if form == "file" else msg, extra=extra)
+        if form == "file":
+            calib = yaml.safe_load((root / "calib.yaml").read_text())
+            calib.pop("camera", None)
+            (root / "calib.yaml").write_text(yaml.safe_dump(calib))
+            (root / "cam.yaml").write_text(yaml.safe_dump(msg))
+        cam = detect_source(root).frames[0].camera
+        np.testing.assert_array_equal(cam.K, f.camera.K)
+        assert cam.D == tuple(self.D) and cam.model == "pinhole"
+        assert (cam.width, cam.height) == (f.camera.width, f.camera.height)
+
+    def test_the_message_form_names_missing_keys(self, tmp_path, raw_frames):
+        msg = {"distortion_model": "plumb_bob", "d": [], "k": [1.0] * 8, "width": 10,
+               "height": 10}
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin, camera=msg)
+        with pytest.raises(InputError, match=r"camera\.k must hold 9 numbers"):
+            detect_source(root)
+
     def test_equidistant_and_rational_polynomial(self, tmp_path, raw_frames):
         f = raw_frames[:1]
         root = generic_folder(tmp_path / "eq", f, write_points_bin,
@@ -646,9 +680,84 @@ class TestInverse:
         np.testing.assert_allclose(T_est @ Ti, np.eye(4), atol=1e-12)
         text = (tmp_path / INVERSE_FILE).read_text()
         assert "CAMERA frame into the LIDAR frame" in text
-        # It can never be mistaken for an --init file.
-        with pytest.raises(InputError, match="missing key 'T_cam_lidar'"):
-            read_extrinsic(tmp_path / INVERSE_FILE)
+        # As an --init file it is read as what it is: the inverse.
+        np.testing.assert_allclose(read_extrinsic(tmp_path / INVERSE_FILE), T_est, atol=1e-12)
+
+
+class TestInitFormats:
+    """--init reads every extrinsic file the tool writes and the usual pose forms."""
+
+    def test_every_file_a_run_writes(self, tmp_path, T_est, raw_frames):
+        from paretocal.io.exports import kitti_rect_of
+
+        write_exports(tmp_path / "other", T_est)                       # a non-KITTI source
+        write_exports(tmp_path / "kitti", T_est, kitti_rect_of(raw_frames))
+        write_extrinsic(tmp_path / "extrinsic.yaml", T_est)
+        for name in (INVERSE_FILE, TF_FILE, KITTI_FILE):
+            np.testing.assert_allclose(read_extrinsic(tmp_path / "other" / name), T_est,
+                                       atol=1e-9)
+        np.testing.assert_allclose(read_extrinsic(tmp_path / "kitti" / KITTI_FILE,
+                                                  kitti_rect_of(raw_frames)), T_est, atol=1e-9)
+        with pytest.raises(InputError, match="only a KITTI source's rectification"):
+            read_extrinsic(tmp_path / "kitti" / KITTI_FILE)
+        np.testing.assert_allclose(read_extrinsic(tmp_path / "extrinsic.yaml"), T_est, atol=1e-9)
+
+    def test_kittis_own_file_through_the_command_line(self, tmp_path, raw_date, raw_frames,
+                                                      capsys):
+        from paretocal.cli import read_init
+
+        T = read_init(raw_date / "calib_velo_to_cam.txt", raw_date, 2)
+        np.testing.assert_allclose(T, raw_frames[0].T_ref, atol=1e-7)
+
+    def test_translation_and_quaternion(self, tmp_path, T_est):
+        from scipy.spatial.transform import Rotation
+
+        x, y, z, w = Rotation.from_matrix(T_est[:3, :3]).as_quat()
+        t = [float(v) for v in T_est[:3, 3]]
+        forms = {
+            "xyzw": {"T_cam_lidar": {"translation": t, "quaternion_xyzw": [x, y, z, w]}},
+            "wxyz": {"T_cam_lidar": {"translation": t, "quaternion_wxyz": [w, x, y, z]}},
+            "map": {"T_cam_lidar": {"translation": dict(zip("xyz", t)),
+                                    "rotation": {"x": x, "y": y, "z": z, "w": w}}},
+        }
+        for name, doc in forms.items():
+            (tmp_path / f"{name}.json").write_text(json.dumps(doc, default=float))
+            np.testing.assert_allclose(read_extrinsic(tmp_path / f"{name}.json"), T_est,
+                                       atol=1e-9)
+        inv = np.linalg.inv(T_est)
+        xi, yi, zi, wi = Rotation.from_matrix(inv[:3, :3]).as_quat()
+        (tmp_path / "inv.json").write_text(json.dumps({"T_lidar_cam": {
+            "translation": [float(v) for v in inv[:3, 3]],
+            "quaternion_xyzw": [xi, yi, zi, wi]}}, default=float))
+        np.testing.assert_allclose(read_extrinsic(tmp_path / "inv.json"), T_est, atol=1e-9)
+
+    @pytest.mark.parametrize("doc, words", [
+        ({"T_cam_lidar": {"translation": [0, 0, 0], "quaternion": [0, 0, 0, 1]}},
+         "ambiguous"),
+        ({"T_cam_lidar": {"translation": [0, 0, 0]}}, "needs a rotation"),
+        ({"T_cam_lidar": {"translation": [0, 0], "quaternion_xyzw": [0, 0, 0, 1]}},
+         "translation must be 3 finite numbers"),
+        ({"T_cam_lidar": {"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 2]}},
+         "not a unit quaternion"),
+        ({"pose": 1, "frame": "x"}, "no extrinsic found (keys: pose, frame)"),
+        ({"transforms": [{"header": {"frame_id": "base"}, "child_frame_id": "imu",
+                          "transform": {"translation": {"x": 0, "y": 0, "z": 0},
+                                        "rotation": {"x": 0, "y": 0, "z": 0, "w": 1}}}]},
+         "no transform between a camera and a LiDAR frame (found base -> imu)"),
+    ])
+    def test_errors_name_the_keys(self, tmp_path, doc, words):
+        (tmp_path / "e.json").write_text(json.dumps(doc))
+        with pytest.raises(InputError, match=re.escape(words)):
+            read_extrinsic(tmp_path / "e.json")
+
+    def test_tf_in_either_direction(self, tmp_path, T_est):
+        from paretocal.io.exports import tf_static_text
+
+        (tmp_path / "a.yaml").write_text(tf_static_text(T_est, "camera_optical", "velodyne"))
+        (tmp_path / "b.yaml").write_text(tf_static_text(np.linalg.inv(T_est), "os_sensor",
+                                                        "cam0"))
+        for name in ("a.yaml", "b.yaml"):
+            np.testing.assert_allclose(read_extrinsic(tmp_path / name), T_est, atol=1e-9)
 
 
 class TestWriteRun:

@@ -105,6 +105,23 @@ def _dataset_options(settings, source, take_init_error: bool):
     return settings
 
 
+def read_init(path: Path, source: Path, camera: int | None):
+    """The extrinsic file ``path`` as ``T_cam_lidar``; a KITTI ``calib_velo_to_cam.txt`` is
+    taken through the rectification of ``source`` (which must then be a KITTI source)."""
+    from .io import detect_source, read_extrinsic
+    from .io.exports import kitti_rect_of
+    from .io.extrinsic import needs_kitti_rect
+
+    rect = None
+    if needs_kitti_rect(path):
+        rect = kitti_rect_of(detect_source(source, 2 if camera is None else camera).frames)
+        if rect is None:
+            raise ParetocalError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
+                                 f"camera 0) but {source} is not a KITTI source; give "
+                                 "T_cam_lidar instead")
+    return read_extrinsic(path, kitti_rect=rect)
+
+
 def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
     """``"DEG,M"`` (or a two-item list) -> (deg, m); (None, None) for None."""
     import math
@@ -182,7 +199,7 @@ def calibrate(
 ) -> None:
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
-    from .io import load_frames, read_extrinsic
+    from .io import load_frames
     from .io.atomic import check_output_dir
 
     _setup_logging(verbose, quiet)
@@ -226,7 +243,7 @@ def calibrate(
     settings = _dataset_options(settings, source, err_deg is None)
     settings.validate()
     check_output_dir(out)
-    T_init = read_extrinsic(init) if init is not None else None
+    T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                      strict)
@@ -362,14 +379,14 @@ def check(
 
     from .check import check_extrinsic
     from .config import load_settings
-    from .io import load_frames, read_extrinsic
+    from .io import load_frames
     from .io.atomic import atomic_write_text
 
     _setup_logging(verbose, quiet)
     if rot_tol <= 0 or trans_tol <= 0:
         raise SettingsError("--rot-tol and --trans-tol must be positive")
     settings = load_settings(config)
-    T = read_extrinsic(extrinsic)
+    T = read_init(extrinsic, source, camera)
     loaded = load_frames(source, frames, camera)
     with _Progress(sys.stderr.isatty() and not quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
@@ -407,7 +424,7 @@ def study(
     import dataclasses
 
     from .config import load_settings
-    from .io import load_frames, read_extrinsic
+    from .io import load_frames
     from .study import StudyPlan, run_study
 
     from .io.atomic import check_output_dir
@@ -422,7 +439,7 @@ def study(
     settings = load_settings(config).replace(search={"seed": seed})
     settings = dataclasses.replace(settings, camera=camera if camera is not None
                                    else settings.camera)
-    T_init = read_extrinsic(init) if init is not None else None
+    T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
     interactive = sys.stderr.isatty() and not quiet
     with _Progress(interactive) as progress:
@@ -450,7 +467,7 @@ def depth(
     """Write per frame the sparse depth map: <stem>.png (KITTI depth benchmark: uint16, metres x
     256, 0 = no return), <stem>.npy (float32 metres) and <stem>_overlay.png."""
     from .depth import write_depth
-    from .io import load_frames, read_extrinsic
+    from .io import load_frames
 
     from .io.atomic import check_output_dir
 
@@ -459,7 +476,7 @@ def depth(
         raise SettingsError("--max-depth must be positive")
     check_output_dir(out)
     loaded = load_frames(source, frames, camera)
-    T = read_extrinsic(extrinsic) if extrinsic is not None else loaded[0].T_ref
+    T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
     interactive = sys.stderr.isatty() and not quiet

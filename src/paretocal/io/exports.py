@@ -192,7 +192,7 @@ def extrinsic_inverse_text(T_cam_lidar: np.ndarray, version: str = "") -> str:
             "T_lidar_cam maps points from the CAMERA frame into the LIDAR frame:\n"
             "p_lidar = T_lidar_cam @ [x, y, z, 1]; it is the pose of the camera in the LiDAR frame.\n"
             "T_lidar_cam = inverse(T_cam_lidar), where T_cam_lidar (LiDAR -> camera) is in\n"
-            "extrinsic.yaml. This file is not an --init file: --init takes T_cam_lidar.\n")
+            "extrinsic.yaml. As an --init file it is read as this inverse.\n")
     rows = [[float(v) for v in row] for row in Ti]
     return ("".join(f"# {line}\n" for line in head.splitlines())
             + yaml.safe_dump({"T_lidar_cam": rows}, default_flow_style=None, sort_keys=False,

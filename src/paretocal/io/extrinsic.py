@@ -13,17 +13,158 @@ from .atomic import atomic_write_text
 from .readers import read_mapping
 
 
-def read_extrinsic(path: str | Path) -> np.ndarray:
-    """Read ``T_cam_lidar`` (4x4, LiDAR -> camera) from a YAML or JSON file.
+#: Words in TF frame names that say which frame is the LiDAR's and which the camera's.
+LIDAR_WORDS = ("lidar", "velo", "laser", "ouster", "os_sensor", "hesai", "pandar", "livox",
+               "rslidar", "scan", "points", "cloud")
+CAMERA_WORDS = ("cam", "optical", "image")
 
-    Raises :class:`InputError` naming the file when the key is missing or the matrix is not a
-    finite rigid transform.
+
+def read_extrinsic(path: str | Path, kitti_rect: np.ndarray | None = None) -> np.ndarray:
+    """Read ``T_cam_lidar`` (4x4, LiDAR -> camera, metres) from any file the tool writes or a
+    common form of it.
+
+    Accepted, by what the file holds:
+
+    * ``T_cam_lidar``: a 4x4 (or 3x4) matrix, or a mapping with ``translation`` (``[x, y, z]``
+      or ``{x, y, z}``) and a rotation as ``quaternion_xyzw`` / ``quaternion_wxyz`` (lists)
+      or ``rotation`` / ``quaternion`` (a mapping ``{x, y, z, w}``); ``extrinsic.yaml``;
+    * ``T_lidar_cam``: the same forms, inverted (``extrinsic_inverse.yaml``);
+    * ``transforms``: a ROS TF list (``tf_static.yaml``); the transform between a camera and a
+      LiDAR frame is taken, in whichever direction it is stored;
+    * ``R:`` and ``T:`` lines (``calib_velo_to_cam.txt``): KITTI's ``Tr_velo_to_cam`` to the
+      unrectified camera 0, so ``kitti_rect`` (``[I | b] @ R_rect_00`` of the KITTI source,
+      see :func:`needs_kitti_rect`) turns it into ``T_cam_lidar``; a file the tool wrote for a
+      non-KITTI source holds ``T_cam_lidar`` itself and says so.
+
+    Raises :class:`InputError` naming the file and the keys it found when none of these is
+    there, or the values are not a finite rigid transform.
     """
     path = Path(path)
+    if _kitti_text(path) is not None:
+        from .exports import read_kitti_velo_to_cam
+
+        T = read_kitti_velo_to_cam(path)
+        if needs_kitti_rect(path):
+            if kitti_rect is None:
+                raise InputError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
+                                 "camera 0), which only a KITTI source's rectification turns "
+                                 "into T_cam_lidar; use it with a KITTI source")
+            T = np.asarray(kitti_rect, dtype=np.float64) @ T
+        return T
     data = read_mapping(path)
-    if "T_cam_lidar" not in data:
-        raise InputError(f"{path}: missing key 'T_cam_lidar'")
-    return check_rigid(data["T_cam_lidar"], str(path))
+    for key, inverse in (("T_cam_lidar", False), ("T_lidar_cam", True)):
+        if key in data:
+            value = data[key]
+            T = (_pose(path, key, value) if isinstance(value, dict)
+                 else check_rigid(value, str(path), key=key))
+            return _inverse(T) if inverse else T
+    if "transforms" in data:
+        return _from_tf(path, data["transforms"])
+    found = ", ".join(map(str, data)) or "none"
+    raise InputError(f"{path}: no extrinsic found (keys: {found}); expected T_cam_lidar (a 4x4 "
+                     "matrix, or translation + quaternion), T_lidar_cam, transforms (a ROS "
+                     "tf_static list) or KITTI's R: and T: lines")
+
+
+def needs_kitti_rect(path: str | Path) -> bool:
+    """Whether ``path`` is a KITTI ``calib_velo_to_cam.txt`` holding ``Tr_velo_to_cam`` (to the
+    unrectified camera 0), so that :func:`read_extrinsic` needs the source's ``kitti_rect``."""
+    text = _kitti_text(Path(path))
+    return text is not None and "T_cam_lidar itself" not in text
+
+
+def _kitti_text(path: Path) -> str | None:
+    """The text of a KITTI-style ``key: values`` file with ``R:`` and ``T:`` lines, or None."""
+    if path.suffix.lower() in (".yaml", ".yml", ".json") or not path.is_file():
+        return None
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    keys = {line.split(":", 1)[0].strip() for line in text.splitlines() if ":" in line}
+    return text if {"R", "T"} <= keys else None
+
+
+def _inverse(T: np.ndarray) -> np.ndarray:
+    from ..geometry import invert
+
+    return invert(T)
+
+
+def _vector(path: Path, name: str, value, names: str) -> np.ndarray:
+    """A list or an ``{x, y, z[, w]}`` mapping of finite numbers, in the order of ``names``."""
+    try:
+        v = (np.array([float(value[k]) for k in names]) if isinstance(value, dict)
+             else np.asarray(value, dtype=np.float64).ravel())
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: {name} must be {len(names)} numbers or a mapping with keys "
+                         f"{', '.join(names)} ({type(exc).__name__}: {exc})") from None
+    if v.size != len(names) or not np.all(np.isfinite(v)):
+        raise InputError(f"{path}: {name} must be {len(names)} finite numbers, got {value!r}")
+    return v
+
+
+def _pose(path: Path, key: str, value: dict) -> np.ndarray:
+    """A 4x4 transform from ``{translation, quaternion_xyzw | quaternion_wxyz | rotation}``."""
+    from scipy.spatial.transform import Rotation
+
+    if "translation" not in value:
+        raise InputError(f"{path}: {key} needs 'translation' with the rotation (keys found: "
+                         f"{', '.join(map(str, value))})")
+    t = _vector(path, f"{key}.translation", value["translation"], "xyz")
+    if "quaternion_xyzw" in value:
+        q = _vector(path, f"{key}.quaternion_xyzw", value["quaternion_xyzw"], "xyzw")
+    elif "quaternion_wxyz" in value:
+        q = np.roll(_vector(path, f"{key}.quaternion_wxyz", value["quaternion_wxyz"], "wxyz"), -1)
+    else:
+        name = next((k for k in ("rotation", "quaternion") if k in value), None)
+        if name is None:
+            raise InputError(f"{path}: {key} needs a rotation: quaternion_xyzw, quaternion_wxyz "
+                             f"or rotation {{x, y, z, w}} (keys found: {', '.join(map(str, value))})")
+        if not isinstance(value[name], dict):
+            raise InputError(f"{path}: {key}.{name} as a list is ambiguous (x, y, z, w or w, x, "
+                             "y, z?); write quaternion_xyzw or quaternion_wxyz, or a mapping "
+                             "with keys x, y, z, w")
+        q = _vector(path, f"{key}.{name}", value[name], "xyzw")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > 1e-3:
+        raise InputError(f"{path}: the rotation of {key} is not a unit quaternion "
+                         f"(norm {norm:.6g})")
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+def _from_tf(path: Path, transforms) -> np.ndarray:
+    """``T_cam_lidar`` from a ROS TF list: the transform between a LiDAR and a camera frame
+    (``T_parent_child`` maps child coordinates into the parent frame)."""
+    if not isinstance(transforms, list) or not transforms:
+        raise InputError(f"{path}: transforms must be a non-empty list of ROS transforms")
+    frames = []
+    for k, tf in enumerate(transforms):
+        try:
+            parent, child = str(tf["header"]["frame_id"]), str(tf["child_frame_id"])
+            tr, rot = tf["transform"]["translation"], tf["transform"]["rotation"]
+        except (KeyError, TypeError):
+            raise InputError(f"{path}: transforms[{k}] lacks header.frame_id, child_frame_id or "
+                             "transform.translation/rotation") from None
+        frames.append(f"{parent} -> {child}")
+        kind = [_frame_kind(parent), _frame_kind(child)]
+        if kind in (["camera", "lidar"], ["lidar", "camera"]):
+            T = _pose(path, f"transforms[{k}].transform",
+                      {"translation": tr, "rotation": rot})
+            return T if kind[0] == "camera" else _inverse(T)
+    raise InputError(f"{path}: no transform between a camera and a LiDAR frame (found "
+                     f"{'; '.join(frames)}); frame names must contain one of "
+                     f"{', '.join(CAMERA_WORDS)} and one of {', '.join(LIDAR_WORDS)}")
+
+
+def _frame_kind(name: str) -> str | None:
+    low = name.lower()
+    if any(w in low for w in LIDAR_WORDS):
+        return "lidar"
+    return "camera" if any(w in low for w in CAMERA_WORDS) else None
 
 
 def extrinsic_yaml(T: np.ndarray, comment: str = "") -> str:

@@ -314,6 +314,52 @@ def _camera_info(path: Path, info: dict, prefix: str = "") -> Camera:
                        info.get("xi"))
 
 
+def _is_message(info: dict) -> bool:
+    """Whether a mapping is a sensor_msgs/CameraInfo message (flat ``K``, ``D``, ``P``)."""
+    return "camera_matrix" not in info and any(k in info for k in ("distortion_model", "k", "d",
+                                                                     "p", "P"))
+
+
+def _camera_info_message(path: Path, info: dict, prefix: str = "") -> Camera:
+    """Intrinsics from a sensor_msgs/CameraInfo message as ``rostopic echo`` (``K``, ``D``,
+    ``P``) or ``ros2 topic echo`` (``k``, ``d``, ``p``) prints it: ``K`` row-major 3x3 (9
+    numbers), or, where ``K`` is absent or all zeros, the left 3x3 of ``P`` (3x4, 12 numbers);
+    ``width``, ``height``, ``distortion_model`` and ``D`` (empty: none)."""
+    def get(key):
+        return info.get(key, info.get(key.lower()))
+
+    def name(key):
+        return f"{prefix}{key if key in info else key.lower()}"
+
+    K = None if get("K") is None else _numbers(path, name("K"), get("K")).ravel()
+    where_K = name("K")
+    if K is None or (K.size == 9 and not np.any(K)):
+        if get("P") is None:
+            raise InputError(f"{path}: missing {prefix}K (or P) (keys found: "
+                             f"{', '.join(map(str, info))})")
+        P = _numbers(path, name("P"), get("P")).ravel()
+        if P.size != 12:
+            raise InputError(f"{path}: {name('P')} must hold 12 numbers (row-major 3x4), got "
+                             f"{P.size}")
+        K, where_K = P.reshape(3, 4)[:, :3], f"{name('P')} (its left 3x3)"
+    elif K.size != 9:
+        raise InputError(f"{path}: {where_K} must hold 9 numbers (row-major 3x3), got {K.size}")
+    for key in ("width", "height"):
+        if get(key) is None:
+            raise InputError(f"{path}: missing {prefix}{key} (keys found: "
+                             f"{', '.join(map(str, info))})")
+    D = get("D")
+    if D is not None and not isinstance(D, str) and len(np.atleast_1d(D)) == 0:
+        D = None
+    model = get("distortion_model")
+    if model is not None and str(model).strip().lower() in ("", "none"):
+        model = None
+    where = {"K": where_K, "width": name("width"), "height": name("height"),
+             "model": name("distortion_model"), "D": name("D"), "xi": f"{prefix}xi"}
+    return _intrinsics(path, where, np.reshape(K, (3, 3)), get("width"), get("height"), D,
+                       model, info.get("xi"))
+
+
 def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
     """The camera of a generic folder: ``camera`` in calib.yaml, or a ROS camera_info file."""
     if data.get("camera_info") is not None:
@@ -326,12 +372,16 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
         ipath = root / ref
         if not ipath.is_file():
             raise InputError(f"{cpath}: camera_info file {ipath} not found")
-        return _camera_info(ipath, read_mapping(ipath))
+        info = read_mapping(ipath)
+        return (_camera_info_message(ipath, info) if _is_message(info)
+                else _camera_info(ipath, info))
     cam = data.get("camera")
     if not isinstance(cam, dict):
         raise InputError(f"{cpath}: missing 'camera' section")
     if "camera_matrix" in cam or "image_width" in cam:
         return _camera_info(cpath, cam, "camera.")
+    if _is_message(cam):
+        return _camera_info_message(cpath, cam, "camera.")
     for key in ("K", "width", "height"):
         if key not in cam:
             raise InputError(f"{cpath}: missing camera.{key}")
