@@ -100,6 +100,16 @@ class TestCalibrate:
         assert doc["config"]["objective"]["w_edge"] == 0.8
         assert doc["decision"]["rule"] == "budget" and doc["objectives"]["ms"] <= 1000
 
+    def test_version_and_short_help(self, capsys):
+        from paretocal import __version__
+
+        assert main(["--version"]) == 0
+        assert capsys.readouterr().out.strip() == f"paretocal {__version__}"
+        assert main(["calibrate", "-h"]) == 0
+        assert "--budget-ms" in capsys.readouterr().out
+        assert main([]) == 2                        # the help, and no empty error line
+        assert "error" not in capsys.readouterr().err
+
     def test_console_script(self, tmp_path):
         exe = shutil.which("paretocal", path=str(__import__("pathlib").Path(sys.executable).parent))
         assert exe, "console script not installed"

@@ -30,9 +30,26 @@ Camera = Annotated[int, typer.Option("--camera", help="KITTI camera index 0-3.")
 
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  context_settings={"help_option_names": ["-h", "--help"]},
                   help="Targetless camera-LiDAR calibration as a Pareto search over accuracy "
                        "and computational cost.")
 log = logging.getLogger("paretocal")
+
+
+def _version(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"paretocal {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(version: Annotated[bool, typer.Option(
+        "--version", callback=_version, is_eager=True,
+        help="Print the version and exit.")] = False) -> None:
+    """Targetless camera-LiDAR calibration as a Pareto search over accuracy and computational
+    cost. Units: metres, degrees and milliseconds unless an option says otherwise."""
 
 
 def _choices(section: str, name: str, cls: str) -> type[Enum]:
@@ -608,7 +625,8 @@ def main(argv: list[str] | None = None) -> int:
     except _USAGE_ERRORS as exc:
         # A usage error from the option parser (unknown option, bad value, ...).
         text = exc.format_message() if hasattr(exc, "format_message") else str(exc)
-        print(f"paretocal: error: {' '.join(text.split())}", file=sys.stderr)
+        if text.strip():              # no command at all: the help was shown, nothing to add
+            print(f"paretocal: error: {' '.join(text.split())}", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - the last line of defence
         if verbose:
