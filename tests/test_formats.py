@@ -784,3 +784,10 @@ class TestWriteRun:
         write_run(self._result(T_est), tmp_path, None, figures=False)
         np.testing.assert_allclose(read_kitti_velo_to_cam(tmp_path / KITTI_FILE), T_est,
                                    atol=1e-12)
+
+
+def test_the_kitti_credit_only_on_kitti_frames(tmp_path, raw_frames):
+    from paretocal.report.figures import KITTI_CREDIT, data_credit
+
+    own = load_frames(generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin))[0]
+    assert data_credit(raw_frames[0]) == KITTI_CREDIT and data_credit(own) == ""

@@ -15,6 +15,12 @@ from ..io.frame import Frame
 KITTI_CREDIT = "data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0"
 
 
+def data_credit(frame: Frame) -> str:
+    """The credit a figure of ``frame`` carries: KITTI's for KITTI frames (they have a
+    ``kitti_rect``), none for a user's own data."""
+    return KITTI_CREDIT if getattr(frame, "kitti_rect", None) is not None else ""
+
+
 def new_figure(figsize=None, dpi=None) -> Figure:
     """A matplotlib Figure of its own: no pyplot, no global backend or figure registry, so
     importing paretocal leaves a notebook's or an application's matplotlib set-up alone."""
@@ -131,6 +137,6 @@ def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
     k = draw_overlay(ax, frame, T, z_min, max_depth)
     fig.text(0.01, 1 - 0.3 * 45 / (h + 45), title, fontsize=11, va="center")
     fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{k} points in view, colour = depth "
-             f"0-{max_depth:g} m   {KITTI_CREDIT}", fontsize=7, va="center", ha="right",
+             f"0-{max_depth:g} m   {data_credit(frame)}", fontsize=7, va="center", ha="right",
              color="0.3")
     save_figure(fig, path, dpi=100)

@@ -223,7 +223,7 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
     ValueError
         If ``frames`` is empty.
     """
-    from .figures import KITTI_CREDIT
+    from .figures import data_credit
 
     if not frames:
         raise ValueError("write_interactive needs at least one frame")
@@ -276,7 +276,7 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
         title=html.escape(title), verdict=_verdict_banner(result), frame_name=html.escape(f.name),
         run_table=_run_table(result, f), plot=plot, buttons="".join(buttons),
         width=int(cam.width), height=int(cam.height), max_depth=f"{MAX_DEPTH:g}",
-        n_points=len(pts), max_points=max_points, credit=html.escape(KITTI_CREDIT),
+        n_points=len(pts), max_points=max_points, credit=html.escape(data_credit(f)),
         data=_json_script(data), css=template("interactive.css"), js=template("interactive.js"))
     atomic_write_text(path, page)
     return path

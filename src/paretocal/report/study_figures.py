@@ -8,7 +8,7 @@ import numpy as np
 
 from matplotlib.colors import Normalize
 
-from .figures import KITTI_CREDIT, save_figure, draw_overlay, new_figure, subplots
+from .figures import data_credit, draw_overlay, new_figure, save_figure, subplots
 
 STAR = dict(s=240, marker="*", color="tab:red", edgecolor="k", zorder=5)
 
@@ -210,7 +210,7 @@ def projections(frame, result, path: Path, max_depth: float = 30.0) -> None:
     for ax, (title, T) in zip(axes, rows):
         k = draw_overlay(ax, frame, T, result.settings.features.z_min, max_depth)
         ax.set_title(f"{title}: {k} points in view", fontsize=10, loc="left")
-    fig.text(0.99, 0.005, f"frame {frame.name}; colour = depth 0-{max_depth:g} m; {KITTI_CREDIT}",
+    fig.text(0.99, 0.005, f"frame {frame.name}; colour = depth 0-{max_depth:g} m; {data_credit(frame)}",
              ha="right", fontsize=7, color="0.3")
     fig.tight_layout()
     save_figure(fig, path, dpi=100)
