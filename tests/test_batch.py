@@ -91,3 +91,67 @@ def test_manifest_errors_name_the_entry(tmp_path):
 def test_cli_bad_manifest_exits_2(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o")]) == 2
     assert "manifest not found" in capsys.readouterr().err
+
+
+BAD_MANIFESTS = {
+    # name: (file name, content, the message after "<manifest>: ")
+    "binary yaml": ("m.yaml", b"\x00\xff\xfe\x01entries", "NUL byte at offset 0"),
+    "NUL in csv": ("m.csv", b"id,source\nd1,da\x00ta\n", "NUL byte at offset 15"),
+    "not utf-8": ("m.csv", b"id,source\nd\xe9,x\n", "not UTF-8 text (byte 0xe9 at offset 11)"),
+    "camera list": ("m.yaml", b"- {id: a, source: x, camera: [1]}\n",
+                    "entry 1: camera [1] is not an integer"),
+    "camera float": ("m.yaml", b"- {id: a, source: x, camera: 2.5}\n",
+                     "entry 1: camera 2.5 is not an integer"),
+    "camera bool": ("m.yaml", b"- {id: a, source: x, camera: true}\n",
+                    "entry 1: camera True is not an integer"),
+    "camera csv": ("m.csv", b"id,source,camera\na,x,two\n", "entry 1: camera 'two' is not"),
+    "id number": ("m.yaml", b"- {id: 0005, source: x}\n",
+                  "entry 1: id 5 must be text; quote it (id: \"0005\")"),
+    "id list": ("m.yaml", b"- {id: [a], source: x}\n", "entry 1: id ['a'] must be text"),
+    "frames sexagesimal": ("m.yaml", b"- {id: a, source: x, frames: 2:4}\n",
+                           "entry 1: frames 124 must be text; quote it (frames: \"2:4\")"),
+    "frames mapping": ("m.yaml", b"- {id: a, source: x, frames: {a: 1}}\n",
+                       "entry 1: frames {'a': 1} must be text"),
+    "source list": ("m.yaml", b"- {id: a, source: [x, y]}\n",
+                    "entry 1: source ['x', 'y'] must be text"),
+    "source NUL": ("m.yaml", b'- {id: a, source: "x\\0"}\n', "entry 1: source contains a NUL"),
+    "source missing": ("m.yaml", b"entries:\n  - {id: a}\n", "entry 1: missing 'source'"),
+    "init mapping": ("m.yaml", b"- {id: a, source: x, init: {T: 1}}\n",
+                     "entry 1: init {'T': 1} must be text"),
+    "vehicle list": ("m.yaml", b"- {id: a, source: x, vehicle: [1]}\n",
+                     "entry 1: vehicle [1] must be text or a number"),
+    "field name number": ("m.yaml", b"- {id: a, source: x, 7: y}\n",
+                          "entry 1: field name 7 is not text"),
+    "entry not a mapping": ("m.yaml", b"- just a string\n", "entry 1: expected a mapping"),
+    "entries not a list": ("m.yaml", b"entries: 5\n", "expected a list of entries"),
+    "csv row too long": ("m.csv", b"id,source\na,x,extra\n",
+                         "line 2: 2 columns in the header, more values in this row"),
+    "csv header only": ("m.csv", b"id,source\n", "the manifest lists no entries"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_MANIFESTS)
+def test_bad_manifest_exits_2_naming_it(case, tmp_path, capsys):
+    name, content, message = BAD_MANIFESTS[case]
+    path = tmp_path / name
+    path.write_bytes(content)
+    assert main(["batch", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"paretocal: error: {path}: {message}") and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_manifest_that_is_a_folder(tmp_path, capsys):
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert f"{tmp_path}: is a folder; expected a YAML or CSV manifest" in capsys.readouterr().err
+
+
+def test_manifest_accepts_numbers_where_numbers_are_meant(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_bytes(b"- {id: a, source: x, vehicle: 7, order: 2, camera: '3'}\n")
+    (e,) = read_manifest(path)
+    assert (e.vehicle, e.order, e.camera) == ("7", "2", 3)
+    csv_path = tmp_path / "m.csv"
+    csv_path.write_bytes(b"\xef\xbb\xbfid,source,camera\nd1,x,3\n")    # a spreadsheet's BOM
+    (e,) = read_manifest(csv_path)
+    assert (e.id, e.camera) == ("d1", 3)

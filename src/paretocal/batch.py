@@ -58,21 +58,24 @@ class Entry:
 def read_manifest(path: str | Path) -> list[Entry]:
     """Entries of a YAML (``entries:`` list, or a bare list) or CSV manifest.
 
-    Raises :class:`InputError` naming the manifest and the entry for a missing ``id`` or
-    ``source``, a duplicate or unsafe id (it names a folder), or an unknown column.
+    Raises :class:`InputError` naming the manifest (and the entry and field where there is
+    one) for a file that is not UTF-8 text, malformed YAML or CSV, a missing ``id`` or
+    ``source``, a duplicate or unsafe id (it names a folder), an unknown field, or a field of
+    the wrong type.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; expected a YAML or CSV manifest")
     if not path.is_file():
         raise InputError(f"{path}: manifest not found")
+    text = _manifest_text(path)
     if path.suffix.lower() == ".csv":
-        with open(path, newline="") as fh:
-            rows = [{k.strip(): (v.strip() if isinstance(v, str) else v) for k, v in r.items()
-                     if k is not None} for r in csv.DictReader(fh)]
+        rows = _csv_rows(path, text)
     else:
         import yaml
 
         try:
-            doc = yaml.safe_load(path.read_text())
+            doc = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
         rows = doc.get("entries") if isinstance(doc, dict) else doc
@@ -84,6 +87,9 @@ def read_manifest(path: str | Path) -> list[Entry]:
         where = f"{path}: entry {k + 1}"
         if not isinstance(row, dict):
             raise InputError(f"{where}: expected a mapping of fields")
+        odd = [key for key in row if not isinstance(key, str)]
+        if odd:
+            raise InputError(f"{where}: field name {odd[0]!r} is not text")
         row = {key: v for key, v in row.items() if v not in (None, "")}
         unknown = sorted(set(row) - known)
         if unknown:
@@ -92,27 +98,83 @@ def read_manifest(path: str | Path) -> list[Entry]:
         for key in ("id", "source"):
             if key not in row:
                 raise InputError(f"{where}: missing '{key}'")
-        eid = str(row["id"])
+        fields = {key: _field(where, key, v) for key, v in row.items()}
+        eid = fields["id"]
         if not _ID.match(eid):
             raise InputError(f"{where}: id {eid!r} must be letters, digits, '_', '-' or '.'")
         if eid in seen:
             raise InputError(f"{where}: duplicate id {eid!r}")
         seen.add(eid)
         for key in ("source", "init"):
-            if key in row:
-                row[key] = str((path.parent / str(row[key])).resolve())
-        try:
-            camera = int(row.get("camera", 2))
-        except ValueError:
-            raise InputError(f"{where}: camera {row['camera']!r} is not an integer") from None
-        entries.append(Entry(id=eid, source=row["source"], camera=camera,
-                             frames=str(row["frames"]) if "frames" in row else None,
-                             init=row.get("init"),
-                             vehicle=str(row["vehicle"]) if "vehicle" in row else None,
-                             order=str(row["order"]) if "order" in row else None))
+            if key in fields:
+                try:
+                    fields[key] = str((path.parent / fields[key]).resolve())
+                except (OSError, RuntimeError) as exc:       # RuntimeError: a symlink loop
+                    raise InputError(f"{where}: {key} {fields[key]!r}: {exc}") from None
+        entries.append(Entry(**fields))
     if not entries:
         raise InputError(f"{path}: the manifest lists no entries")
     return entries
+
+
+def _manifest_text(path: Path) -> str:
+    """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
+    before a parser reports it as something else."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the manifest ({exc.strerror or exc})") from None
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise InputError(f"{path}: NUL byte at offset {nul}; a manifest is YAML or CSV text")
+    try:
+        return data.decode("utf-8-sig")        # -sig: spreadsheets save CSV with a BOM
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {data[exc.start]:#04x} at offset "
+                         f"{exc.start}); a manifest is YAML or CSV text") from None
+
+
+def _csv_rows(path: Path, text: str) -> list[dict]:
+    import io as _io
+
+    reader = csv.DictReader(_io.StringIO(text, newline=""))
+    rows = []
+    try:
+        for row in reader:
+            if None in row:                    # DictReader's key for values beyond the header
+                raise InputError(f"{path}: line {reader.line_num}: {len(reader.fieldnames)} "
+                                 f"columns in the header, more values in this row")
+            rows.append({k.strip(): v.strip() if isinstance(v, str) else v
+                         for k, v in row.items()})
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({exc})") from None
+    return rows
+
+
+def _field(where: str, key: str, value) -> str | int:
+    """One manifest field, checked for its type: text for paths, ids and frame selections
+    (YAML turns unquoted ``2:4`` into the number 124 and ``0005`` into 5), an integer for the
+    camera, text or a number for the vehicle and the order."""
+    if isinstance(value, str) and "\0" in value:
+        raise InputError(f"{where}: {key} contains a NUL character")
+    if key == "camera":
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.strip().isdigit():
+            return int(value)
+        raise InputError(f"{where}: camera {value!r} is not an integer")
+    if key in ("vehicle", "order"):
+        if isinstance(value, (str, int, float)) and not isinstance(value, bool):
+            return str(value)
+        raise InputError(f"{where}: {key} {value!r} must be text or a number")
+    if isinstance(value, str):
+        return value
+    hint = ""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        hint = ('; quote it (frames: "2:4"): YAML reads unquoted 2:4 as the number 124'
+                if key == "frames" else
+                f'; quote it ({key}: "0005"): YAML reads unquoted 0005 as the number 5')
+    raise InputError(f"{where}: {key} {value!r} must be text{hint}")
 
 
 def read_record(run_dir: Path) -> dict | None:
