@@ -4,7 +4,10 @@ recorded and does not stop the others; a rerun skips what is done."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+import logging
+import shutil
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -12,7 +15,7 @@ import pytest
 import yaml
 
 from paretocal import Settings
-from paretocal.batch import read_manifest, run_batch
+from paretocal.batch import Entry, entry_fingerprint, is_done, read_manifest, run_batch
 from paretocal.cli import main
 from paretocal.errors import InputError
 from paretocal.geometry import correction_matrix
@@ -38,9 +41,24 @@ def manifest(tmp_path_factory, raw_date, raw_frames):
     return path
 
 
-def test_batch_records_failures_and_resumes(manifest, tmp_path):
-    out = tmp_path / "batch"
-    r = run_batch(manifest, out, TINY, workers=2, check=True)
+@pytest.fixture(scope="module")
+def first_run(manifest, tmp_path_factory):
+    """The manifest's batch, run once: (out, result, the log records of ``paretocal``)."""
+    out = tmp_path_factory.mktemp("batch") / "out"
+    records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = records.append
+    logger = logging.getLogger("paretocal")
+    logger.addHandler(handler)
+    try:
+        r = run_batch(manifest, out, TINY, workers=2, check=True)
+    finally:
+        logger.removeHandler(handler)
+    return out, r, records
+
+
+def test_batch_records_failures_and_resumes(manifest, first_run):
+    out, r, _ = first_run
     assert (r["entries"], r["ran"], r["ok"], r["failed"], r["skipped"]) == (3, 3, 2, 1, 0)
     with open(out / "summary.csv") as fh:
         rows = {row["id"]: row for row in csv.DictReader(fh)}
@@ -50,6 +68,9 @@ def test_batch_records_failures_and_resumes(manifest, tmp_path):
         row = rows[eid]
         assert row["status"] == "ok" and row["vehicle"] == "car1"
         assert (out / "runs" / eid / "result.json").exists()
+        # Published as a run folder: staged, with the list of what it wrote.
+        assert not (out / "runs" / eid / ".staging").exists()
+        assert "result.json" in (out / "runs" / eid / ".outputs").read_text().split()
         assert float(row["drift_rotation_deg"]) > 0.1          # the start was 1.5 deg off
         assert row["check_verdict"] in ("calibrated", "miscalibrated")
         assert float(row["ref_rotation_deg"]) >= 0
@@ -68,6 +89,69 @@ def test_batch_records_failures_and_resumes(manifest, tmp_path):
     again = run_batch(manifest, out, TINY, workers=1, check=True)
     assert (again["skipped"], again["ran"], again["ok"], again["failed"]) == (2, 1, 2, 1)
     assert (out / "runs" / "car1_a" / "result.json").stat().st_mtime_ns == stamp
+
+
+def test_worker_warnings_name_their_entry(first_run):
+    """Two frames per entry: each run warns that it may be unreliable, in its worker; the
+    driver logs it with the entry's id, and each failure likewise."""
+    out, _, records = first_run
+    messages = [rec.getMessage() for rec in records]
+    for eid in ("car1_a", "car1_b"):
+        assert any(m.startswith(f"[{eid}] the result may be unreliable: only 2 frame(s)")
+                   for m in messages), messages
+        record = json.loads((out / "runs" / eid / "entry.json").read_text())
+        assert any("only 2 frame(s)" in m for _, m in record["log"])
+    assert any(m.startswith("[car2_broken] failed: ") and "does/not/exist" in m
+               for m in messages)
+    assert not any(m.startswith("the result may be unreliable") for m in messages)
+
+
+def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(first_run[0], out)
+    doc = yaml.safe_load(manifest.read_text())
+    a, b, _ = doc["entries"]
+    a["frames"] = "1:3"                                        # other frames
+    b["source"] = str(raw_date / "2011_09_26_drive_sample_sync")   # the same data, named anew
+    edited = manifest.parent / "edited.yaml"                  # beside it: same nominal.yaml
+    edited.write_text(yaml.safe_dump({"entries": [a, b]}))
+    r = run_batch(edited, out, TINY, workers=1, check=True)
+    assert (r["ran"], r["skipped"], r["ok"]) == (2, 0, 2)
+    with open(out / "summary.csv") as fh:
+        rows = {row["id"]: row for row in csv.DictReader(fh)}
+    assert rows["car1_a"]["frames"] == "1:3"
+    assert rows["car1_b"]["source"] == b["source"]
+    assert json.loads((out / "runs" / "car1_a" / "result.json").read_text())["frames"] == \
+        ["0000000001", "0000000002"]
+    # Unchanged: done, and no cluster is started for nothing.
+    again = run_batch(edited, out, TINY, workers=1, check=True)
+    assert (again["ran"], again["skipped"], again["entries_per_minute"]) == (0, 2, None)
+
+
+def test_fingerprint_covers_settings_entry_and_init_file(manifest):
+    (e, _, _) = read_manifest(manifest)
+    base = entry_fingerprint(e, TINY.to_dict())
+    assert entry_fingerprint(e, TINY.to_dict()) == base
+    record = {"status": "ok", "fingerprint": base}
+    assert is_done(record, base)
+    assert not is_done({**record, "status": "failed"}, base)
+    assert not is_done({"status": "ok"}, base)                # a record from before fingerprints
+    for change in ({"gens": 4}, {"seed": 1}, {"pop": 20}):
+        assert not is_done(record, entry_fingerprint(e, TINY.replace(search=change).to_dict()))
+    assert entry_fingerprint(e, TINY.to_dict(), check=False) != base
+    assert entry_fingerprint(e, TINY.to_dict(), figures=True) != base
+    assert entry_fingerprint(dataclasses.replace(e, camera=3), TINY.to_dict()) != base
+
+
+def test_an_edited_init_file_changes_the_fingerprint(tmp_path):
+    init = tmp_path / "nominal.yaml"
+    write_extrinsic(init, np.eye(4))
+    e = Entry(id="a", source=str(tmp_path), init=str(init))
+    before = entry_fingerprint(e, TINY.to_dict())
+    T = np.eye(4)
+    T[0, 3] = 0.1
+    write_extrinsic(init, T)
+    assert entry_fingerprint(e, TINY.to_dict()) != before
 
 
 def test_manifest_errors_name_the_entry(tmp_path):

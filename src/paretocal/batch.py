@@ -2,10 +2,13 @@
 
 A manifest lists sources (dataset folders), optional frame selections, initial extrinsics and
 vehicle ids. Each entry is an independent task: the worker reads its own frames (no large array
-crosses the network), calibrates, checks the initial extrinsic for miscalibration, writes the
-usual run directory and a small ``entry.json`` record, and returns that record. An entry whose
-record says ``ok`` is done: rerunning the batch skips it, so a killed batch resumes. A failing
-entry is recorded with its reason and does not stop the others.
+crosses the network), calibrates, checks the initial extrinsic for miscalibration, publishes
+the usual run directory (:func:`paretocal.rundir.publish_run`) and a small ``entry.json``
+record, and returns that record. An entry whose record says ``ok`` for the same entry and
+settings (a fingerprint of both) is done: rerunning the batch skips it, so a killed batch
+resumes, while an edited entry or changed settings calibrate it again. A failing entry is
+recorded with its reason and does not stop the others. What a task logs comes back in its
+record and is logged by the driver naming the entry.
 
 Manifest (YAML)::
 
@@ -20,19 +23,22 @@ paths are relative to the manifest.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
+import logging
 import os
 import re
+import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-
 
 from .errors import InputError, ParetocalError
 from .io.atomic import atomic_path, atomic_write_text
 from .report.results import json_default
 
 RECORD = "entry.json"
+log = logging.getLogger(__name__)
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
                    "n_points", "drift_rotation_deg", "drift_translation_cm",
@@ -180,9 +186,33 @@ def _field(where: str, key: str, value) -> str | int:
 def read_record(run_dir: Path) -> dict | None:
     """The entry's record, or None when it has none (or an unreadable one)."""
     try:
-        return json.loads((Path(run_dir) / RECORD).read_text())
+        record = json.loads((Path(run_dir) / RECORD).read_text())
     except (OSError, ValueError):
         return None
+    return record if isinstance(record, dict) else None
+
+
+def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
+                      figures: bool = False) -> str:
+    """What an entry's result depends on, hashed: its fields, the bytes of its initial
+    extrinsic (so an edited ``init`` file counts too), the settings (``Settings.to_dict``) and
+    whether it is checked and drawn. A record is done only for the same fingerprint."""
+    from .search.checkpoint import fingerprint
+
+    init = None
+    if entry.init:
+        try:
+            init = hashlib.sha256(Path(entry.init).read_bytes()).hexdigest()
+        except OSError:
+            pass                     # the entry fails on it when it runs; nothing to compare
+    return fingerprint(asdict(entry), init, settings,
+                       {"check": bool(check), "figures": bool(figures)})
+
+
+def is_done(record: dict | None, fingerprint: str) -> bool:
+    """Whether an entry's record says it calibrated, with the same entry and settings."""
+    return (record is not None and record.get("status") == "ok"
+            and record.get("fingerprint") == fingerprint)
 
 
 def _failed(entry: Entry, reason: str, t0: float) -> dict:
@@ -190,8 +220,41 @@ def _failed(entry: Entry, reason: str, t0: float) -> dict:
             "wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()}
 
 
+class _EntryLog(logging.Handler):
+    """The paretocal log records of one entry's task, kept for its record instead of the
+    worker's stderr; the driver shows them prefixed with the entry's id.
+
+    Only the task's own thread counts: a worker may run several tasks at once. While the
+    handler is attached, Python's last-resort handler stays silent, so nothing reaches the
+    worker's stderr unprefixed.
+    """
+
+    def __init__(self, level: int):
+        super().__init__(level)
+        self.thread = threading.get_ident()
+        self.records: list[list[str]] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread == self.thread:
+            try:
+                self.records.append([record.levelname, record.getMessage()])
+            except Exception:  # noqa: BLE001 - a bad format string must not fail the entry
+                self.handleError(record)
+
+    def __enter__(self) -> list[list[str]]:
+        logger = logging.getLogger("paretocal")
+        if logger.getEffectiveLevel() > self.level:
+            logger.setLevel(self.level)
+        logger.addHandler(self)
+        return self.records
+
+    def __exit__(self, *exc) -> None:
+        logging.getLogger("paretocal").removeHandler(self)
+
+
 def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
-              threads: int = 1, figures: bool = False) -> dict:
+              threads: int = 1, figures: bool = False, fingerprint: str | None = None,
+              log_level: int = logging.WARNING) -> dict:
     """Calibrate one entry into ``out_dir/runs/<id>``; never raises (runs on a Dask worker).
 
     Parameters
@@ -206,6 +269,10 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         Threads of the evaluation kernel in this task.
     figures : bool
         Write the PNG figures of each run.
+    fingerprint : str, optional
+        :func:`entry_fingerprint` of the entry and settings, stored in the record.
+    log_level : int
+        Log records at this level or above are kept in the record's ``log``.
 
     Returns
     -------
@@ -214,10 +281,34 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         "failed"), ``reason``, the chosen ``T_cam_lidar``, ``drift_*`` (how far the
         calibration moved the initial extrinsic), reference errors when known, the check's
         verdict and score, ``reliability`` ("ok" or "unreliable") with ``reliability_reason``
-        (the reasons, joined), ``wall_s``.
+        (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
+        pairs logged while the entry ran).
     """
+    from .rundir import locked
+
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
+    with _EntryLog(log_level) as messages:
+        try:
+            # One writer per run folder: a task left running by an interrupted batch on a
+            # remote cluster must not mix its files with the rerun's.
+            with locked(run_dir):
+                # The record describes the last attempt: drop the old one before starting,
+                # so a task killed half-way leaves no record that says "ok".
+                (run_dir / RECORD).unlink(missing_ok=True)
+                record = _attempt(entry, settings, run_dir, check, threads, figures, t0)
+                record.update({"fingerprint": fingerprint, "log": messages})
+                atomic_write_text(run_dir / RECORD,
+                                  json.dumps(record, indent=1, default=json_default) + "\n")
+        except (ParetocalError, OSError) as exc:   # the folder is locked or cannot be written
+            record = _failed(entry, str(exc), t0)
+            record.update({"fingerprint": fingerprint, "log": messages})
+    return record
+
+
+def _attempt(entry: Entry, settings: dict, run_dir: Path, check: bool, threads: int,
+             figures: bool, t0: float) -> dict:
+    """The entry's record: calibrated, or failed with the reason."""
     try:
         from .objective.kernel import set_threads
 
@@ -228,8 +319,6 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         record = _failed(entry, str(exc), t0)
     except Exception as exc:  # noqa: BLE001 - one bad entry must not stop the batch
         record = _failed(entry, f"unexpected {type(exc).__name__}: {exc}", t0)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(run_dir / RECORD, json.dumps(record, indent=1, default=json_default) + "\n")
     return record
 
 
@@ -241,15 +330,16 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .config import settings_from_mapping
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
-    from .report.results import write_run
     from .pipeline import calibrate
+    from .rundir import publish_run
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_extrinsic(entry.init) if entry.init else None
     result = calibrate(frames, T_init, settings)
-    write_run(result, run_dir, frames, figures=figures)
+    # Staged and published with result.json last: the folder never mixes two runs.
+    publish_run(result, run_dir, result.sweeps or frames, figures=figures)
     drift = pose_error(result.T_cam_lidar, result.T_init)
     ref = result.reference_error or {}
     record = {**asdict(entry), "status": "ok", "reason": "",
@@ -311,6 +401,12 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
               figures: bool = False, progress=None) -> dict:
     """Calibrate every entry of ``manifest`` on a Dask cluster.
 
+    An entry is skipped when its ``entry.json`` says ``ok`` with the fingerprint
+    (:func:`entry_fingerprint`) of the same entry fields and settings; an edited entry, an
+    edited ``init`` file or other settings calibrate it again. What the entries' tasks log
+    is logged here (logger ``paretocal.batch``) as ``[<id>] message`` when each finishes,
+    and so is each failure.
+
     Parameters
     ----------
     manifest : path
@@ -333,57 +429,26 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
         ``entries``, ``skipped`` (already done), ``ran``, ``ok``, ``failed``, ``wall_s``,
         ``entries_per_minute`` (of the entries run), ``records`` and the written ``files``.
     """
-    from distributed import Client, LocalCluster, as_completed
-
     from .config import Settings
 
     t0 = time.perf_counter()
     entries = read_manifest(manifest)
     settings = (settings or Settings()).validate()
+    settings_dict = settings.to_dict()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    prints = {e.id: entry_fingerprint(e, settings_dict, check, figures) for e in entries}
     done = {}
     for e in entries:
         rec = read_record(out / "runs" / e.id)
-        if rec is not None and rec.get("status") == "ok":
+        if is_done(rec, prints[e.id]):
             done[e.id] = rec
     pending = [e for e in entries if e.id not in done]
     records = dict(done)
-    cluster = None
-    if scheduler is None:
-        workers = max(1, int(workers or 1))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, host="127.0.0.1")
-        client = Client(cluster)
-        threads = max(1, (os.cpu_count() or 1) // workers)
-    else:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        threads = 1
-    t_run = time.perf_counter()
-    try:
-        futures = {client.submit(run_entry, e, settings.to_dict(), str(out.resolve()), check,
-                                 threads, figures, key=f"paretocal-{e.id}-{time.time_ns()}",
-                                 pure=False): e for e in pending}
-        for k, fut in enumerate(as_completed(futures)):
-            e = futures[fut]
-            try:
-                rec = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a crashed worker fails its entry only
-                rec = _failed(e, f"worker crashed: {type(exc).__name__}: {exc}", time.perf_counter())
-                run_dir = out / "runs" / e.id
-                run_dir.mkdir(parents=True, exist_ok=True)
-                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
-            records[e.id] = rec
-            if progress is not None:
-                progress(k + 1, len(pending))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    run_s = time.perf_counter() - t_run
+    run_s = 0.0
+    if pending:                                # nothing to run: no cluster to start
+        run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler, workers,
+                             check, figures, progress)
     ordered = [records[e.id] for e in entries]
     rows = summary_rows(ordered)
     files = write_summary(rows, out)
@@ -397,3 +462,69 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
             "run_s": run_s,
             "entries_per_minute": 60.0 * len(pending) / run_s if pending and run_s > 0 else None,
             "records": ordered, "files": files}
+
+
+def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dict: dict,
+                 out: Path, scheduler, workers, check: bool, figures: bool,
+                 progress) -> float:
+    """Run the entries' tasks, adding their records to ``records`` as they finish; returns
+    the seconds from the cluster's start to its close."""
+    from distributed import as_completed
+
+    log_level = logging.getLogger("paretocal").getEffectiveLevel()
+    client, cluster, threads = _connect(scheduler, workers, log_level)
+    t_run = time.perf_counter()
+    try:
+        futures = {client.submit(run_entry, e, settings_dict, str(out.resolve()), check,
+                                 threads, figures, prints[e.id], log_level,
+                                 key=f"paretocal-{e.id}-{time.time_ns()}", pure=False): e
+                   for e in pending}
+        for k, fut in enumerate(as_completed(futures)):
+            e = futures[fut]
+            try:
+                rec = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a crashed worker fails its entry only
+                rec = _failed(e, f"worker crashed: {type(exc).__name__}: {exc}",
+                              time.perf_counter())
+                rec["fingerprint"] = prints[e.id]
+                run_dir = out / "runs" / e.id
+                run_dir.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
+            records[e.id] = rec
+            _relay(rec)
+            if progress is not None:
+                progress(k + 1, len(pending))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return time.perf_counter() - t_run
+
+
+def _connect(scheduler: str | None, workers: int | None, log_level: int):
+    """``(client, cluster, kernel threads per task)``; ``cluster`` is the local one started
+    here (None with ``scheduler``)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="20s"), None, 1
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    workers = max(1, int(workers or 1))
+    # Dask's own warnings (a worker restarted, a task cancelled) repeat what the records
+    # say; they are shown with --verbose only.
+    quiet = logging.WARNING if log_level <= logging.INFO else logging.ERROR
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, host="127.0.0.1", silence_logs=quiet)
+    return Client(cluster), cluster, max(1, (os.cpu_count() or 1) // workers)
+
+
+def _relay(record: dict) -> None:
+    """Log what the entry's task logged, and its failure, each line naming the entry."""
+    for level, message in record.get("log") or []:
+        levelno = logging.getLevelName(level)
+        log.log(levelno if isinstance(levelno, int) else logging.WARNING, "[%s] %s",
+                record["id"], message)
+    if record["status"] != "ok":
+        log.warning("[%s] failed: %s", record["id"], record["reason"])
