@@ -106,7 +106,7 @@ def test_worker_warnings_name_their_entry(first_run):
     assert not any(m.startswith("the result may be unreliable") for m in messages)
 
 
-def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_path):
+def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_path, capsys):
     out = tmp_path / "out"
     shutil.copytree(first_run[0], out)
     doc = yaml.safe_load(manifest.read_text())
@@ -126,6 +126,82 @@ def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_
     # Unchanged: done, and no cluster is started for nothing.
     again = run_batch(edited, out, TINY, workers=1, check=True)
     assert (again["ran"], again["skipped"], again["entries_per_minute"]) == (0, 2, None)
+    # The same from the command line (TINY as a config file): every entry ok, exit 0.
+    assert main(["batch", str(edited), "--out", str(out), "--config", str(tiny_config(tmp_path))]) == 0
+    assert "2 ok, 0 failed, 2 already done" in capsys.readouterr().out
+
+
+def tiny_config(folder):
+    path = folder / "tiny.yaml"
+    path.write_text(yaml.safe_dump({"search": {"pop": 16, "gens": 3},
+                                    "decision": {"refine": False}}))
+    return path
+
+
+def test_cli_exits_4_when_an_entry_failed(manifest, first_run, tmp_path, capsys):
+    """Another --seed calibrates every entry again; the broken one fails: exit 4, the last
+    line says how many failed and where the summary is, worker warnings name their entry."""
+    out = tmp_path / "out"
+    shutil.copytree(first_run[0], out)
+    rc = main(["batch", str(manifest), "--out", str(out), "--config",
+               str(tiny_config(tmp_path)), "--seed", "1", "--no-check"])
+    captured = capsys.readouterr()
+    assert rc == 4
+    assert "3 entries: 2 ok, 1 failed, 0 already done" in captured.out
+    err = captured.err.splitlines()
+    assert err[-1] == f"paretocal: 1 of 3 entries failed; the reasons are in {out / 'summary.csv'}"
+    assert any(line.startswith("paretocal: WARNING: [car1_a] the result may be unreliable")
+               for line in err)
+    assert any(line.startswith("paretocal: WARNING: [car2_broken] failed: ") for line in err)
+    # --no-check is part of what the entry was run with: the old check's verdict is gone.
+    assert "check_verdict" not in json.loads((out / "runs" / "car1_a" / "entry.json").read_text())
+    with open(out / "summary.csv") as fh:
+        assert {row["id"]: row["status"] for row in csv.DictReader(fh)} == \
+            {"car1_a": "ok", "car1_b": "ok", "car2_broken": "failed"}
+
+
+def test_interrupted_batch_stops_quietly_and_says_how_far_it_got(raw_date, tmp_path, capfd,
+                                                                   monkeypatch):
+    """SIGTERM once the first entry is in, while the second is calibrating: the cluster is
+    shut down without a word from Dask, the summary holds what is done, one line says so,
+    exit 130."""
+    import os
+    import signal
+
+    from paretocal import cli
+
+    def terminate(self, stage, done, total):
+        os.kill(os.getpid(), signal.SIGTERM)       # cli.main turns it into KeyboardInterrupt
+
+    monkeypatch.setattr(cli._Progress, "__call__", terminate)
+    manifest = tmp_path / "m.yaml"                # one worker runs them in this order
+    manifest.write_text(yaml.safe_dump([{"id": "broken", "source": "does/not/exist"},
+                                        {"id": "long", "source": str(raw_date)}]))
+    config = tmp_path / "long.yaml"               # far longer than the test waits
+    config.write_text(yaml.safe_dump({"search": {"pop": 400, "gens": 200}}))
+    # Dask logs in this process through its own handler (bound to the stderr of its import,
+    # which capfd does not see): collect those records here.
+    dask_records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = dask_records.append
+    logging.getLogger("distributed").addHandler(handler)
+    out = tmp_path / "out"
+    try:
+        rc = main(["batch", str(manifest), "--out", str(out), "--config", str(config),
+                   "--no-check", "--quiet"])
+    finally:
+        logging.getLogger("distributed").removeHandler(handler)
+    captured = capfd.readouterr()                 # the worker processes' stderr too
+    assert rc == 130
+    assert [r.getMessage() for r in dask_records] == []
+    assert captured.out == ""
+    assert captured.err == (f"paretocal: batch interrupted: 0 of 2 entries done (summary so "
+                            f"far in {out / 'summary.csv'}); rerun the same command to "
+                            "continue\n")
+    with open(out / "summary.csv") as fh:
+        assert [(row["id"], row["status"]) for row in csv.DictReader(fh)] == \
+            [("broken", "failed")]
+    assert not (out / "runs" / "long" / "entry.json").exists()
 
 
 def test_fingerprint_covers_settings_entry_and_init_file(manifest):

@@ -22,6 +22,7 @@ paths are relative to the manifest.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import json
@@ -46,6 +47,20 @@ SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "fram
                    "reliability", "reliability_reason", "check_verdict", "check_score",
                    "wall_s", "worker"] + \
                   [f"T_{i}{j}" for i in range(3) for j in range(4)]
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """The batch stopped on an interrupt (SIGINT, or SIGTERM turned into one) after stopping
+    its tasks and writing the summary of the entries done so far.
+
+    Attributes: ``done`` (entries ok), ``total`` (entries of the manifest), ``summary`` (the
+    path of ``summary.csv``). A subclass of KeyboardInterrupt: code that handles interrupts
+    handles this one.
+    """
+
+    def __init__(self, done: int, total: int, summary: Path):
+        super().__init__(f"batch interrupted: {done} of {total} entries done")
+        self.done, self.total, self.summary = done, total, summary
 
 
 @dataclass(frozen=True)
@@ -447,8 +462,14 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     records = dict(done)
     run_s = 0.0
     if pending:                                # nothing to run: no cluster to start
-        run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler, workers,
-                             check, figures, progress)
+        try:
+            run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler,
+                                 workers, check, figures, progress)
+        except KeyboardInterrupt:
+            finished = [records[e.id] for e in entries if e.id in records]
+            write_summary(summary_rows(finished), out)
+            raise BatchInterrupted(sum(r["status"] == "ok" for r in finished), len(entries),
+                                   out / "summary.csv") from None
     ordered = [records[e.id] for e in entries]
     rows = summary_rows(ordered)
     files = write_summary(rows, out)
@@ -472,7 +493,9 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dic
     from distributed import as_completed
 
     log_level = logging.getLogger("paretocal").getEffectiveLevel()
-    client, cluster, threads = _connect(scheduler, workers, log_level)
+    futures: dict = {}
+    with _deferred_interrupts():
+        client, cluster, threads = _connect(scheduler, workers, log_level)
     t_run = time.perf_counter()
     try:
         futures = {client.submit(run_entry, e, settings_dict, str(out.resolve()), check,
@@ -494,11 +517,55 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dic
             _relay(rec)
             if progress is not None:
                 progress(k + 1, len(pending))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    except BaseException:
+        # An interrupt: drop the queued tasks and stop the cluster, which kills the running
+        # ones; Dask's account of that (cancelled tasks, workers killed) is noise here.
+        with _silenced("distributed"):
+            client.cancel(list(futures))
+            _close(client, cluster)
+        raise
+    _close(client, cluster)
     return time.perf_counter() - t_run
+
+
+def _close(client, cluster) -> None:
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def _deferred_interrupts():
+    """Hold SIGINT and SIGTERM until the block is done, then raise KeyboardInterrupt if one
+    came: a cluster interrupted while it starts cannot be closed (its workers have no state to
+    close from) and Dask reports that with a traceback at exit."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield                                  # signals reach the main thread only
+        return
+    caught = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _silenced(name: str):
+    """Nothing below CRITICAL from logger ``name`` (in this process) for the duration."""
+    logger = logging.getLogger(name)
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _connect(scheduler: str | None, workers: int | None, log_level: int):
