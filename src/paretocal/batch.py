@@ -443,6 +443,14 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     dict
         ``entries``, ``skipped`` (already done), ``ran``, ``ok``, ``failed``, ``wall_s``,
         ``entries_per_minute`` (of the entries run), ``records`` and the written ``files``.
+
+    Raises
+    ------
+    InputError
+        For a bad manifest (before anything runs) or a scheduler that cannot be reached.
+    BatchInterrupted
+        On KeyboardInterrupt (SIGINT, or SIGTERM turned into one by the caller), after the
+        tasks and the cluster are stopped and the summary of the entries finished is written.
     """
     from .config import Settings
 
@@ -518,8 +526,8 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dic
             if progress is not None:
                 progress(k + 1, len(pending))
     except BaseException:
-        # An interrupt: drop the queued tasks and stop the cluster, which kills the running
-        # ones; Dask's account of that (cancelled tasks, workers killed) is noise here.
+        # An interrupt (or a bug here): drop the queued tasks and stop the cluster, which kills
+        # the running ones; Dask's account of that (tasks cancelled, workers killed) is noise.
         with _silenced("distributed"):
             client.cancel(list(futures))
             _close(client, cluster)
@@ -551,7 +559,8 @@ def _deferred_interrupts():
         yield
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            if handler is not None:            # None: set outside Python, nothing to restore
+                signal.signal(sig, handler)
     if caught:
         raise KeyboardInterrupt
 
