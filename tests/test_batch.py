@@ -4,7 +4,10 @@ recorded and does not stop the others; a rerun skips what is done."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+import logging
+import shutil
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -12,7 +15,7 @@ import pytest
 import yaml
 
 from paretocal import Settings
-from paretocal.batch import read_manifest, run_batch
+from paretocal.batch import Entry, entry_fingerprint, is_done, read_manifest, run_batch
 from paretocal.cli import main
 from paretocal.errors import InputError
 from paretocal.geometry import correction_matrix
@@ -38,9 +41,24 @@ def manifest(tmp_path_factory, raw_date, raw_frames):
     return path
 
 
-def test_batch_records_failures_and_resumes(manifest, tmp_path):
-    out = tmp_path / "batch"
-    r = run_batch(manifest, out, TINY, workers=2, check=True)
+@pytest.fixture(scope="module")
+def first_run(manifest, tmp_path_factory):
+    """The manifest's batch, run once: (out, result, the log records of ``paretocal``)."""
+    out = tmp_path_factory.mktemp("batch") / "out"
+    records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = records.append
+    logger = logging.getLogger("paretocal")
+    logger.addHandler(handler)
+    try:
+        r = run_batch(manifest, out, TINY, workers=2, check=True)
+    finally:
+        logger.removeHandler(handler)
+    return out, r, records
+
+
+def test_batch_records_failures_and_resumes(manifest, first_run):
+    out, r, _ = first_run
     assert (r["entries"], r["ran"], r["ok"], r["failed"], r["skipped"]) == (3, 3, 2, 1, 0)
     with open(out / "summary.csv") as fh:
         rows = {row["id"]: row for row in csv.DictReader(fh)}
@@ -50,6 +68,9 @@ def test_batch_records_failures_and_resumes(manifest, tmp_path):
         row = rows[eid]
         assert row["status"] == "ok" and row["vehicle"] == "car1"
         assert (out / "runs" / eid / "result.json").exists()
+        # Published as a run folder: staged, with the list of what it wrote.
+        assert not (out / "runs" / eid / ".staging").exists()
+        assert "result.json" in (out / "runs" / eid / ".outputs").read_text().split()
         assert float(row["drift_rotation_deg"]) > 0.1          # the start was 1.5 deg off
         assert row["check_verdict"] in ("calibrated", "miscalibrated")
         assert float(row["ref_rotation_deg"]) >= 0
@@ -68,6 +89,145 @@ def test_batch_records_failures_and_resumes(manifest, tmp_path):
     again = run_batch(manifest, out, TINY, workers=1, check=True)
     assert (again["skipped"], again["ran"], again["ok"], again["failed"]) == (2, 1, 2, 1)
     assert (out / "runs" / "car1_a" / "result.json").stat().st_mtime_ns == stamp
+
+
+def test_worker_warnings_name_their_entry(first_run):
+    """Two frames per entry: each run warns that it may be unreliable, in its worker; the
+    driver logs it with the entry's id, and each failure likewise."""
+    out, _, records = first_run
+    messages = [rec.getMessage() for rec in records]
+    for eid in ("car1_a", "car1_b"):
+        assert any(m.startswith(f"[{eid}] the result may be unreliable: only 2 frame(s)")
+                   for m in messages), messages
+        record = json.loads((out / "runs" / eid / "entry.json").read_text())
+        assert any("only 2 frame(s)" in m for _, m in record["log"])
+    assert any(m.startswith("[car2_broken] failed: ") and "does/not/exist" in m
+               for m in messages)
+    assert not any(m.startswith("the result may be unreliable") for m in messages)
+
+
+def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_path, capsys):
+    out = tmp_path / "out"
+    shutil.copytree(first_run[0], out)
+    doc = yaml.safe_load(manifest.read_text())
+    a, b, _ = doc["entries"]
+    a["frames"] = "1:3"                                        # other frames
+    b["source"] = str(raw_date / "2011_09_26_drive_sample_sync")   # the same data, named anew
+    edited = manifest.parent / "edited.yaml"                  # beside it: same nominal.yaml
+    edited.write_text(yaml.safe_dump({"entries": [a, b]}))
+    r = run_batch(edited, out, TINY, workers=1, check=True)
+    assert (r["ran"], r["skipped"], r["ok"]) == (2, 0, 2)
+    with open(out / "summary.csv") as fh:
+        rows = {row["id"]: row for row in csv.DictReader(fh)}
+    assert rows["car1_a"]["frames"] == "1:3"
+    assert rows["car1_b"]["source"] == b["source"]
+    assert json.loads((out / "runs" / "car1_a" / "result.json").read_text())["frames"] == \
+        ["0000000001", "0000000002"]
+    # Unchanged: done, and no cluster is started for nothing.
+    again = run_batch(edited, out, TINY, workers=1, check=True)
+    assert (again["ran"], again["skipped"], again["entries_per_minute"]) == (0, 2, None)
+    # The same from the command line (TINY as a config file): every entry ok, exit 0.
+    assert main(["batch", str(edited), "--out", str(out), "--config", str(tiny_config(tmp_path))]) == 0
+    assert "2 ok, 0 failed, 2 already done" in capsys.readouterr().out
+
+
+def tiny_config(folder):
+    path = folder / "tiny.yaml"
+    path.write_text(yaml.safe_dump({"search": {"pop": 16, "gens": 3},
+                                    "decision": {"refine": False}}))
+    return path
+
+
+def test_cli_exits_4_when_an_entry_failed(manifest, first_run, tmp_path, capsys):
+    """Another --seed calibrates every entry again; the broken one fails: exit 4, the last
+    line says how many failed and where the summary is, worker warnings name their entry."""
+    out = tmp_path / "out"
+    shutil.copytree(first_run[0], out)
+    rc = main(["batch", str(manifest), "--out", str(out), "--config",
+               str(tiny_config(tmp_path)), "--seed", "1", "--no-check"])
+    captured = capsys.readouterr()
+    assert rc == 4
+    assert "3 entries: 2 ok, 1 failed, 0 already done" in captured.out
+    err = captured.err.splitlines()
+    assert err[-1] == f"paretocal: 1 of 3 entries failed; the reasons are in {out / 'summary.csv'}"
+    assert any(line.startswith("paretocal: WARNING: [car1_a] the result may be unreliable")
+               for line in err)
+    assert any(line.startswith("paretocal: WARNING: [car2_broken] failed: ") for line in err)
+    # --no-check is part of what the entry was run with: the old check's verdict is gone.
+    assert "check_verdict" not in json.loads((out / "runs" / "car1_a" / "entry.json").read_text())
+    with open(out / "summary.csv") as fh:
+        assert {row["id"]: row["status"] for row in csv.DictReader(fh)} == \
+            {"car1_a": "ok", "car1_b": "ok", "car2_broken": "failed"}
+
+
+def test_interrupted_batch_stops_quietly_and_says_how_far_it_got(raw_date, tmp_path, capfd,
+                                                                   monkeypatch):
+    """SIGTERM once the first entry is in, while the second is calibrating: the cluster is
+    shut down without a word from Dask, the summary holds what is done, one line says so,
+    exit 130."""
+    import os
+    import signal
+
+    from paretocal import cli
+
+    def terminate(self, stage, done, total):
+        os.kill(os.getpid(), signal.SIGTERM)       # cli.main turns it into KeyboardInterrupt
+
+    monkeypatch.setattr(cli._Progress, "__call__", terminate)
+    manifest = tmp_path / "m.yaml"                # one worker runs them in this order
+    manifest.write_text(yaml.safe_dump([{"id": "broken", "source": "does/not/exist"},
+                                        {"id": "long", "source": str(raw_date)}]))
+    config = tmp_path / "long.yaml"               # far longer than the test waits
+    config.write_text(yaml.safe_dump({"search": {"pop": 400, "gens": 200}}))
+    # Dask logs in this process through its own handler (bound to the stderr of its import,
+    # which capfd does not see): collect those records here.
+    dask_records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = dask_records.append
+    logging.getLogger("distributed").addHandler(handler)
+    out = tmp_path / "out"
+    try:
+        rc = main(["batch", str(manifest), "--out", str(out), "--config", str(config),
+                   "--no-check", "--quiet"])
+    finally:
+        logging.getLogger("distributed").removeHandler(handler)
+    captured = capfd.readouterr()                 # the worker processes' stderr too
+    assert rc == 130
+    assert [r.getMessage() for r in dask_records] == []
+    assert captured.out == ""
+    assert captured.err == (f"paretocal: batch interrupted: 0 of 2 entries done (summary so "
+                            f"far in {out / 'summary.csv'}); rerun the same command to "
+                            "continue\n")
+    with open(out / "summary.csv") as fh:
+        assert [(row["id"], row["status"]) for row in csv.DictReader(fh)] == \
+            [("broken", "failed")]
+    assert not (out / "runs" / "long" / "entry.json").exists()
+
+
+def test_fingerprint_covers_settings_entry_and_init_file(manifest):
+    (e, _, _) = read_manifest(manifest)
+    base = entry_fingerprint(e, TINY.to_dict())
+    assert entry_fingerprint(e, TINY.to_dict()) == base
+    record = {"status": "ok", "fingerprint": base}
+    assert is_done(record, base)
+    assert not is_done({**record, "status": "failed"}, base)
+    assert not is_done({"status": "ok"}, base)                # a record from before fingerprints
+    for change in ({"gens": 4}, {"seed": 1}, {"pop": 20}):
+        assert not is_done(record, entry_fingerprint(e, TINY.replace(search=change).to_dict()))
+    assert entry_fingerprint(e, TINY.to_dict(), check=False) != base
+    assert entry_fingerprint(e, TINY.to_dict(), figures=True) != base
+    assert entry_fingerprint(dataclasses.replace(e, camera=3), TINY.to_dict()) != base
+
+
+def test_an_edited_init_file_changes_the_fingerprint(tmp_path):
+    init = tmp_path / "nominal.yaml"
+    write_extrinsic(init, np.eye(4))
+    e = Entry(id="a", source=str(tmp_path), init=str(init))
+    before = entry_fingerprint(e, TINY.to_dict())
+    T = np.eye(4)
+    T[0, 3] = 0.1
+    write_extrinsic(init, T)
+    assert entry_fingerprint(e, TINY.to_dict()) != before
 
 
 def test_manifest_errors_name_the_entry(tmp_path):
@@ -91,3 +251,67 @@ def test_manifest_errors_name_the_entry(tmp_path):
 def test_cli_bad_manifest_exits_2(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o")]) == 2
     assert "manifest not found" in capsys.readouterr().err
+
+
+BAD_MANIFESTS = {
+    # name: (file name, content, the message after "<manifest>: ")
+    "binary yaml": ("m.yaml", b"\x00\xff\xfe\x01entries", "NUL byte at offset 0"),
+    "NUL in csv": ("m.csv", b"id,source\nd1,da\x00ta\n", "NUL byte at offset 15"),
+    "not utf-8": ("m.csv", b"id,source\nd\xe9,x\n", "not UTF-8 text (byte 0xe9 at offset 11)"),
+    "camera list": ("m.yaml", b"- {id: a, source: x, camera: [1]}\n",
+                    "entry 1: camera [1] is not an integer"),
+    "camera float": ("m.yaml", b"- {id: a, source: x, camera: 2.5}\n",
+                     "entry 1: camera 2.5 is not an integer"),
+    "camera bool": ("m.yaml", b"- {id: a, source: x, camera: true}\n",
+                    "entry 1: camera True is not an integer"),
+    "camera csv": ("m.csv", b"id,source,camera\na,x,two\n", "entry 1: camera 'two' is not"),
+    "id number": ("m.yaml", b"- {id: 0005, source: x}\n",
+                  "entry 1: id 5 must be text; quote it (id: \"0005\")"),
+    "id list": ("m.yaml", b"- {id: [a], source: x}\n", "entry 1: id ['a'] must be text"),
+    "frames sexagesimal": ("m.yaml", b"- {id: a, source: x, frames: 2:4}\n",
+                           "entry 1: frames 124 must be text; quote it (frames: \"2:4\")"),
+    "frames mapping": ("m.yaml", b"- {id: a, source: x, frames: {a: 1}}\n",
+                       "entry 1: frames {'a': 1} must be text"),
+    "source list": ("m.yaml", b"- {id: a, source: [x, y]}\n",
+                    "entry 1: source ['x', 'y'] must be text"),
+    "source NUL": ("m.yaml", b'- {id: a, source: "x\\0"}\n', "entry 1: source contains a NUL"),
+    "source missing": ("m.yaml", b"entries:\n  - {id: a}\n", "entry 1: missing 'source'"),
+    "init mapping": ("m.yaml", b"- {id: a, source: x, init: {T: 1}}\n",
+                     "entry 1: init {'T': 1} must be text"),
+    "vehicle list": ("m.yaml", b"- {id: a, source: x, vehicle: [1]}\n",
+                     "entry 1: vehicle [1] must be text or a number"),
+    "field name number": ("m.yaml", b"- {id: a, source: x, 7: y}\n",
+                          "entry 1: field name 7 is not text"),
+    "entry not a mapping": ("m.yaml", b"- just a string\n", "entry 1: expected a mapping"),
+    "entries not a list": ("m.yaml", b"entries: 5\n", "expected a list of entries"),
+    "csv row too long": ("m.csv", b"id,source\na,x,extra\n",
+                         "line 2: 2 columns in the header, more values in this row"),
+    "csv header only": ("m.csv", b"id,source\n", "the manifest lists no entries"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_MANIFESTS)
+def test_bad_manifest_exits_2_naming_it(case, tmp_path, capsys):
+    name, content, message = BAD_MANIFESTS[case]
+    path = tmp_path / name
+    path.write_bytes(content)
+    assert main(["batch", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"paretocal: error: {path}: {message}") and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_manifest_that_is_a_folder(tmp_path, capsys):
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert f"{tmp_path}: is a folder; expected a YAML or CSV manifest" in capsys.readouterr().err
+
+
+def test_manifest_accepts_numbers_where_numbers_are_meant(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_bytes(b"- {id: a, source: x, vehicle: 7, order: 2, camera: '3'}\n")
+    (e,) = read_manifest(path)
+    assert (e.vehicle, e.order, e.camera) == ("7", "2", 3)
+    csv_path = tmp_path / "m.csv"
+    csv_path.write_bytes(b"\xef\xbb\xbfid,source,camera\nd1,x,3\n")    # a spreadsheet's BOM
+    (e,) = read_manifest(csv_path)
+    assert (e.id, e.camera) == ("d1", 3)

@@ -2,10 +2,13 @@
 
 A manifest lists sources (dataset folders), optional frame selections, initial extrinsics and
 vehicle ids. Each entry is an independent task: the worker reads its own frames (no large array
-crosses the network), calibrates, checks the initial extrinsic for miscalibration, writes the
-usual run directory and a small ``entry.json`` record, and returns that record. An entry whose
-record says ``ok`` is done: rerunning the batch skips it, so a killed batch resumes. A failing
-entry is recorded with its reason and does not stop the others.
+crosses the network), calibrates, checks the initial extrinsic for miscalibration, publishes
+the usual run directory (:func:`paretocal.rundir.publish_run`) and a small ``entry.json``
+record, and returns that record. An entry whose record says ``ok`` for the same entry and
+settings (a fingerprint of both) is done: rerunning the batch skips it, so a killed batch
+resumes, while an edited entry or changed settings calibrate it again. A failing entry is
+recorded with its reason and does not stop the others. What a task logs comes back in its
+record and is logged by the driver naming the entry.
 
 Manifest (YAML)::
 
@@ -19,20 +22,24 @@ paths are relative to the manifest.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import hashlib
 import json
+import logging
 import os
 import re
+import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-
 
 from .errors import InputError, ParetocalError
 from .io.atomic import atomic_path, atomic_write_text
 from .report.results import json_default
 
 RECORD = "entry.json"
+log = logging.getLogger(__name__)
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
                    "n_points", "drift_rotation_deg", "drift_translation_cm",
@@ -40,6 +47,20 @@ SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "fram
                    "reliability", "reliability_reason", "check_verdict", "check_score",
                    "wall_s", "worker"] + \
                   [f"T_{i}{j}" for i in range(3) for j in range(4)]
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """The batch stopped on an interrupt (SIGINT, or SIGTERM turned into one) after stopping
+    its tasks and writing the summary of the entries done so far.
+
+    Attributes: ``done`` (entries ok), ``total`` (entries of the manifest), ``summary`` (the
+    path of ``summary.csv``). A subclass of KeyboardInterrupt: code that handles interrupts
+    handles this one.
+    """
+
+    def __init__(self, done: int, total: int, summary: Path):
+        super().__init__(f"batch interrupted: {done} of {total} entries done")
+        self.done, self.total, self.summary = done, total, summary
 
 
 @dataclass(frozen=True)
@@ -58,21 +79,24 @@ class Entry:
 def read_manifest(path: str | Path) -> list[Entry]:
     """Entries of a YAML (``entries:`` list, or a bare list) or CSV manifest.
 
-    Raises :class:`InputError` naming the manifest and the entry for a missing ``id`` or
-    ``source``, a duplicate or unsafe id (it names a folder), or an unknown column.
+    Raises :class:`InputError` naming the manifest (and the entry and field where there is
+    one) for a file that is not UTF-8 text, malformed YAML or CSV, a missing ``id`` or
+    ``source``, a duplicate or unsafe id (it names a folder), an unknown field, or a field of
+    the wrong type.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; expected a YAML or CSV manifest")
     if not path.is_file():
         raise InputError(f"{path}: manifest not found")
+    text = _manifest_text(path)
     if path.suffix.lower() == ".csv":
-        with open(path, newline="") as fh:
-            rows = [{k.strip(): (v.strip() if isinstance(v, str) else v) for k, v in r.items()
-                     if k is not None} for r in csv.DictReader(fh)]
+        rows = _csv_rows(path, text)
     else:
         import yaml
 
         try:
-            doc = yaml.safe_load(path.read_text())
+            doc = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
         rows = doc.get("entries") if isinstance(doc, dict) else doc
@@ -84,6 +108,9 @@ def read_manifest(path: str | Path) -> list[Entry]:
         where = f"{path}: entry {k + 1}"
         if not isinstance(row, dict):
             raise InputError(f"{where}: expected a mapping of fields")
+        odd = [key for key in row if not isinstance(key, str)]
+        if odd:
+            raise InputError(f"{where}: field name {odd[0]!r} is not text")
         row = {key: v for key, v in row.items() if v not in (None, "")}
         unknown = sorted(set(row) - known)
         if unknown:
@@ -92,35 +119,115 @@ def read_manifest(path: str | Path) -> list[Entry]:
         for key in ("id", "source"):
             if key not in row:
                 raise InputError(f"{where}: missing '{key}'")
-        eid = str(row["id"])
+        fields = {key: _field(where, key, v) for key, v in row.items()}
+        eid = fields["id"]
         if not _ID.match(eid):
             raise InputError(f"{where}: id {eid!r} must be letters, digits, '_', '-' or '.'")
         if eid in seen:
             raise InputError(f"{where}: duplicate id {eid!r}")
         seen.add(eid)
         for key in ("source", "init"):
-            if key in row:
-                row[key] = str((path.parent / str(row[key])).resolve())
-        try:
-            camera = int(row.get("camera", 2))
-        except ValueError:
-            raise InputError(f"{where}: camera {row['camera']!r} is not an integer") from None
-        entries.append(Entry(id=eid, source=row["source"], camera=camera,
-                             frames=str(row["frames"]) if "frames" in row else None,
-                             init=row.get("init"),
-                             vehicle=str(row["vehicle"]) if "vehicle" in row else None,
-                             order=str(row["order"]) if "order" in row else None))
+            if key in fields:
+                try:
+                    fields[key] = str((path.parent / fields[key]).resolve())
+                except (OSError, RuntimeError) as exc:       # RuntimeError: a symlink loop
+                    raise InputError(f"{where}: {key} {fields[key]!r}: {exc}") from None
+        entries.append(Entry(**fields))
     if not entries:
         raise InputError(f"{path}: the manifest lists no entries")
     return entries
 
 
+def _manifest_text(path: Path) -> str:
+    """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
+    before a parser reports it as something else."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the manifest ({exc.strerror or exc})") from None
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise InputError(f"{path}: NUL byte at offset {nul}; a manifest is YAML or CSV text")
+    try:
+        return data.decode("utf-8-sig")        # -sig: spreadsheets save CSV with a BOM
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {data[exc.start]:#04x} at offset "
+                         f"{exc.start}); a manifest is YAML or CSV text") from None
+
+
+def _csv_rows(path: Path, text: str) -> list[dict]:
+    import io as _io
+
+    reader = csv.DictReader(_io.StringIO(text, newline=""))
+    rows = []
+    try:
+        for row in reader:
+            if None in row:                    # DictReader's key for values beyond the header
+                raise InputError(f"{path}: line {reader.line_num}: {len(reader.fieldnames)} "
+                                 f"columns in the header, more values in this row")
+            rows.append({k.strip(): v.strip() if isinstance(v, str) else v
+                         for k, v in row.items()})
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({exc})") from None
+    return rows
+
+
+def _field(where: str, key: str, value) -> str | int:
+    """One manifest field, checked for its type: text for paths, ids and frame selections
+    (YAML turns unquoted ``2:4`` into the number 124 and ``0005`` into 5), an integer for the
+    camera, text or a number for the vehicle and the order."""
+    if isinstance(value, str) and "\0" in value:
+        raise InputError(f"{where}: {key} contains a NUL character")
+    if key == "camera":
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.strip().isdigit():
+            return int(value)
+        raise InputError(f"{where}: camera {value!r} is not an integer")
+    if key in ("vehicle", "order"):
+        if isinstance(value, (str, int, float)) and not isinstance(value, bool):
+            return str(value)
+        raise InputError(f"{where}: {key} {value!r} must be text or a number")
+    if isinstance(value, str):
+        return value
+    hint = ""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        hint = ('; quote it (frames: "2:4"): YAML reads unquoted 2:4 as the number 124'
+                if key == "frames" else
+                f'; quote it ({key}: "0005"): YAML reads unquoted 0005 as the number 5')
+    raise InputError(f"{where}: {key} {value!r} must be text{hint}")
+
+
 def read_record(run_dir: Path) -> dict | None:
     """The entry's record, or None when it has none (or an unreadable one)."""
     try:
-        return json.loads((Path(run_dir) / RECORD).read_text())
+        record = json.loads((Path(run_dir) / RECORD).read_text())
     except (OSError, ValueError):
         return None
+    return record if isinstance(record, dict) else None
+
+
+def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
+                      figures: bool = False) -> str:
+    """What an entry's result depends on, hashed: its fields, the bytes of its initial
+    extrinsic (so an edited ``init`` file counts too), the settings (``Settings.to_dict``) and
+    whether it is checked and drawn. A record is done only for the same fingerprint."""
+    from .search.checkpoint import fingerprint
+
+    init = None
+    if entry.init:
+        try:
+            init = hashlib.sha256(Path(entry.init).read_bytes()).hexdigest()
+        except OSError:
+            pass                     # the entry fails on it when it runs; nothing to compare
+    return fingerprint(asdict(entry), init, settings,
+                       {"check": bool(check), "figures": bool(figures)})
+
+
+def is_done(record: dict | None, fingerprint: str) -> bool:
+    """Whether an entry's record says it calibrated, with the same entry and settings."""
+    return (record is not None and record.get("status") == "ok"
+            and record.get("fingerprint") == fingerprint)
 
 
 def _failed(entry: Entry, reason: str, t0: float) -> dict:
@@ -128,8 +235,41 @@ def _failed(entry: Entry, reason: str, t0: float) -> dict:
             "wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()}
 
 
+class _EntryLog(logging.Handler):
+    """The paretocal log records of one entry's task, kept for its record instead of the
+    worker's stderr; the driver shows them prefixed with the entry's id.
+
+    Only the task's own thread counts: a worker may run several tasks at once. While the
+    handler is attached, Python's last-resort handler stays silent, so nothing reaches the
+    worker's stderr unprefixed.
+    """
+
+    def __init__(self, level: int):
+        super().__init__(level)
+        self.thread = threading.get_ident()
+        self.records: list[list[str]] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread == self.thread:
+            try:
+                self.records.append([record.levelname, record.getMessage()])
+            except Exception:  # noqa: BLE001 - a bad format string must not fail the entry
+                self.handleError(record)
+
+    def __enter__(self) -> list[list[str]]:
+        logger = logging.getLogger("paretocal")
+        if logger.getEffectiveLevel() > self.level:
+            logger.setLevel(self.level)
+        logger.addHandler(self)
+        return self.records
+
+    def __exit__(self, *exc) -> None:
+        logging.getLogger("paretocal").removeHandler(self)
+
+
 def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
-              threads: int = 1, figures: bool = False) -> dict:
+              threads: int = 1, figures: bool = False, fingerprint: str | None = None,
+              log_level: int = logging.WARNING) -> dict:
     """Calibrate one entry into ``out_dir/runs/<id>``; never raises (runs on a Dask worker).
 
     Parameters
@@ -144,6 +284,10 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         Threads of the evaluation kernel in this task.
     figures : bool
         Write the PNG figures of each run.
+    fingerprint : str, optional
+        :func:`entry_fingerprint` of the entry and settings, stored in the record.
+    log_level : int
+        Log records at this level or above are kept in the record's ``log``.
 
     Returns
     -------
@@ -152,10 +296,34 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         "failed"), ``reason``, the chosen ``T_cam_lidar``, ``drift_*`` (how far the
         calibration moved the initial extrinsic), reference errors when known, the check's
         verdict and score, ``reliability`` ("ok" or "unreliable") with ``reliability_reason``
-        (the reasons, joined), ``wall_s``.
+        (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
+        pairs logged while the entry ran).
     """
+    from .rundir import locked
+
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
+    with _EntryLog(log_level) as messages:
+        try:
+            # One writer per run folder: a task left running by an interrupted batch on a
+            # remote cluster must not mix its files with the rerun's.
+            with locked(run_dir):
+                # The record describes the last attempt: drop the old one before starting,
+                # so a task killed half-way leaves no record that says "ok".
+                (run_dir / RECORD).unlink(missing_ok=True)
+                record = _attempt(entry, settings, run_dir, check, threads, figures, t0)
+                record.update({"fingerprint": fingerprint, "log": messages})
+                atomic_write_text(run_dir / RECORD,
+                                  json.dumps(record, indent=1, default=json_default) + "\n")
+        except (ParetocalError, OSError) as exc:   # the folder is locked or cannot be written
+            record = _failed(entry, str(exc), t0)
+            record.update({"fingerprint": fingerprint, "log": messages})
+    return record
+
+
+def _attempt(entry: Entry, settings: dict, run_dir: Path, check: bool, threads: int,
+             figures: bool, t0: float) -> dict:
+    """The entry's record: calibrated, or failed with the reason."""
     try:
         from .objective.kernel import set_threads
 
@@ -166,8 +334,6 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         record = _failed(entry, str(exc), t0)
     except Exception as exc:  # noqa: BLE001 - one bad entry must not stop the batch
         record = _failed(entry, f"unexpected {type(exc).__name__}: {exc}", t0)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(run_dir / RECORD, json.dumps(record, indent=1, default=json_default) + "\n")
     return record
 
 
@@ -179,15 +345,16 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .config import settings_from_mapping
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
-    from .report.results import write_run
     from .pipeline import calibrate
+    from .rundir import publish_run
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_extrinsic(entry.init) if entry.init else None
     result = calibrate(frames, T_init, settings)
-    write_run(result, run_dir, frames, figures=figures)
+    # Staged and published with result.json last: the folder never mixes two runs.
+    publish_run(result, run_dir, result.sweeps or frames, figures=figures)
     drift = pose_error(result.T_cam_lidar, result.T_init)
     ref = result.reference_error or {}
     record = {**asdict(entry), "status": "ok", "reason": "",
@@ -249,6 +416,12 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
               figures: bool = False, progress=None) -> dict:
     """Calibrate every entry of ``manifest`` on a Dask cluster.
 
+    An entry is skipped when its ``entry.json`` says ``ok`` with the fingerprint
+    (:func:`entry_fingerprint`) of the same entry fields and settings; an edited entry, an
+    edited ``init`` file or other settings calibrate it again. What the entries' tasks log
+    is logged here (logger ``paretocal.batch``) as ``[<id>] message`` when each finishes,
+    and so is each failure.
+
     Parameters
     ----------
     manifest : path
@@ -270,58 +443,41 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     dict
         ``entries``, ``skipped`` (already done), ``ran``, ``ok``, ``failed``, ``wall_s``,
         ``entries_per_minute`` (of the entries run), ``records`` and the written ``files``.
-    """
-    from distributed import Client, LocalCluster, as_completed
 
+    Raises
+    ------
+    InputError
+        For a bad manifest (before anything runs) or a scheduler that cannot be reached.
+    BatchInterrupted
+        On KeyboardInterrupt (SIGINT, or SIGTERM turned into one by the caller), after the
+        tasks and the cluster are stopped and the summary of the entries finished is written.
+    """
     from .config import Settings
 
     t0 = time.perf_counter()
     entries = read_manifest(manifest)
     settings = (settings or Settings()).validate()
+    settings_dict = settings.to_dict()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    prints = {e.id: entry_fingerprint(e, settings_dict, check, figures) for e in entries}
     done = {}
     for e in entries:
         rec = read_record(out / "runs" / e.id)
-        if rec is not None and rec.get("status") == "ok":
+        if is_done(rec, prints[e.id]):
             done[e.id] = rec
     pending = [e for e in entries if e.id not in done]
     records = dict(done)
-    cluster = None
-    if scheduler is None:
-        workers = max(1, int(workers or 1))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, host="127.0.0.1")
-        client = Client(cluster)
-        threads = max(1, (os.cpu_count() or 1) // workers)
-    else:
+    run_s = 0.0
+    if pending:                                # nothing to run: no cluster to start
         try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        threads = 1
-    t_run = time.perf_counter()
-    try:
-        futures = {client.submit(run_entry, e, settings.to_dict(), str(out.resolve()), check,
-                                 threads, figures, key=f"paretocal-{e.id}-{time.time_ns()}",
-                                 pure=False): e for e in pending}
-        for k, fut in enumerate(as_completed(futures)):
-            e = futures[fut]
-            try:
-                rec = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a crashed worker fails its entry only
-                rec = _failed(e, f"worker crashed: {type(exc).__name__}: {exc}", time.perf_counter())
-                run_dir = out / "runs" / e.id
-                run_dir.mkdir(parents=True, exist_ok=True)
-                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
-            records[e.id] = rec
-            if progress is not None:
-                progress(k + 1, len(pending))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    run_s = time.perf_counter() - t_run
+            run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler,
+                                 workers, check, figures, progress)
+        except KeyboardInterrupt:
+            finished = [records[e.id] for e in entries if e.id in records]
+            write_summary(summary_rows(finished), out)
+            raise BatchInterrupted(sum(r["status"] == "ok" for r in finished), len(entries),
+                                   out / "summary.csv") from None
     ordered = [records[e.id] for e in entries]
     rows = summary_rows(ordered)
     files = write_summary(rows, out)
@@ -335,3 +491,116 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
             "run_s": run_s,
             "entries_per_minute": 60.0 * len(pending) / run_s if pending and run_s > 0 else None,
             "records": ordered, "files": files}
+
+
+def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dict: dict,
+                 out: Path, scheduler, workers, check: bool, figures: bool,
+                 progress) -> float:
+    """Run the entries' tasks, adding their records to ``records`` as they finish; returns
+    the seconds from the cluster's start to its close."""
+    from distributed import as_completed
+
+    log_level = logging.getLogger("paretocal").getEffectiveLevel()
+    futures: dict = {}
+    with _deferred_interrupts():
+        client, cluster, threads = _connect(scheduler, workers, log_level)
+    t_run = time.perf_counter()
+    try:
+        futures = {client.submit(run_entry, e, settings_dict, str(out.resolve()), check,
+                                 threads, figures, prints[e.id], log_level,
+                                 key=f"paretocal-{e.id}-{time.time_ns()}", pure=False): e
+                   for e in pending}
+        for k, fut in enumerate(as_completed(futures)):
+            e = futures[fut]
+            try:
+                rec = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a crashed worker fails its entry only
+                rec = _failed(e, f"worker crashed: {type(exc).__name__}: {exc}",
+                              time.perf_counter())
+                rec["fingerprint"] = prints[e.id]
+                run_dir = out / "runs" / e.id
+                run_dir.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
+            records[e.id] = rec
+            _relay(rec)
+            if progress is not None:
+                progress(k + 1, len(pending))
+    except BaseException:
+        # An interrupt (or a bug here): drop the queued tasks and stop the cluster, which kills
+        # the running ones; Dask's account of that (tasks cancelled, workers killed) is noise.
+        with _silenced("distributed"):
+            client.cancel(list(futures))
+            _close(client, cluster)
+        raise
+    _close(client, cluster)
+    return time.perf_counter() - t_run
+
+
+def _close(client, cluster) -> None:
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def _deferred_interrupts():
+    """Hold SIGINT and SIGTERM until the block is done, then raise KeyboardInterrupt if one
+    came: a cluster interrupted while it starts cannot be closed (its workers have no state to
+    close from) and Dask reports that with a traceback at exit."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield                                  # signals reach the main thread only
+        return
+    caught = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            if handler is not None:            # None: set outside Python, nothing to restore
+                signal.signal(sig, handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _silenced(name: str):
+    """Nothing below CRITICAL from logger ``name`` (in this process) for the duration."""
+    logger = logging.getLogger(name)
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _connect(scheduler: str | None, workers: int | None, log_level: int):
+    """``(client, cluster, kernel threads per task)``; ``cluster`` is the local one started
+    here (None with ``scheduler``)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="20s"), None, 1
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    workers = max(1, int(workers or 1))
+    # Dask's own warnings (a worker restarted, a task cancelled) repeat what the records
+    # say; they are shown with --verbose only.
+    quiet = logging.WARNING if log_level <= logging.INFO else logging.ERROR
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, host="127.0.0.1", silence_logs=quiet)
+    return Client(cluster), cluster, max(1, (os.cpu_count() or 1) // workers)
+
+
+def _relay(record: dict) -> None:
+    """Log what the entry's task logged, and its failure, each line naming the entry."""
+    for level, message in record.get("log") or []:
+        levelno = logging.getLevelName(level)
+        log.log(levelno if isinstance(levelno, int) else logging.WARNING, "[%s] %s",
+                record["id"], message)
+    if record["status"] != "ok":
+        log.warning("[%s] failed: %s", record["id"], record["reason"])

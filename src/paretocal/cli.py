@@ -1,7 +1,9 @@
 """Command line: a thin layer that parses options, calls the library and maps errors to exits.
 
 Exit status: 0 success, 2 bad input or usage (one line on stderr naming the file or option),
-1 anything unexpected, 130 interrupted.
+1 anything unexpected, 130 interrupted; 3 ``calibrate --strict`` with a result judged
+unreliable; 4 ``batch`` with at least one failed entry (the others are done and summary.csv
+is written).
 """
 
 from __future__ import annotations
@@ -523,8 +525,15 @@ def batch(
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
-    """Calibrate every entry of MANIFEST as a task on Dask; skip entries already done."""
-    from .batch import run_batch
+    """Calibrate every entry of MANIFEST as a task on Dask; skip entries already done (ok
+    with the same entry and settings).
+
+    Exit status: 0 when every entry is ok or already done; 4 when any entry failed (the
+    others still run; summary.csv gives each reason); 2 for a bad manifest or option; 130
+    when interrupted (Ctrl-C or SIGTERM), after writing the summary of what is done: rerun the
+    same command to continue.
+    """
+    from .batch import BatchInterrupted, run_batch
     from .config import load_settings
 
     from .io.atomic import check_output_dir
@@ -536,12 +545,25 @@ def batch(
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
     interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
-        r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
-                      progress=lambda d, t: progress("entries", d, t))
+    try:
+        with _Progress(interactive) as progress:
+            r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
+                          progress=lambda d, t: progress("entries", d, t))
+    except BatchInterrupted as exc:
+        print(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done (summary "
+              f"so far in {exc.summary}); rerun the same command to continue", file=sys.stderr)
+        raise typer.Exit(130) from None
     rate = f", {r['entries_per_minute']:.2f} entries/min" if r["entries_per_minute"] else ""
     typer.echo(f"paretocal: {r['entries']} entries: {r['ok']} ok, {r['failed']} failed, "
                f"{r['skipped']} already done{rate}; wrote {out / 'summary.csv'}")
+    if r["failed"]:
+        print(f"paretocal: {r['failed']} of {r['entries']} entries failed; the reasons are in "
+              f"{out / 'summary.csv'}", file=sys.stderr)
+        raise typer.Exit(BATCH_FAILED_EXIT)
+
+
+#: Exit status of ``batch`` when at least one entry failed.
+BATCH_FAILED_EXIT = 4
 
 
 #: The option parser's usage errors: click's, and those of the click that recent typer
