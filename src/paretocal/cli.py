@@ -550,8 +550,8 @@ def batch(
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
                           progress=lambda d, t: progress("entries", d, t))
     except BatchInterrupted as exc:
-        print(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done (summary "
-              f"so far in {exc.summary}); rerun the same command to continue", file=sys.stderr)
+        _report(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done "
+                f"(summary so far in {exc.summary}); rerun the same command to continue")
         raise typer.Exit(130) from None
     rate = f", {r['entries_per_minute']:.2f} entries/min" if r["entries_per_minute"] else ""
     typer.echo(f"paretocal: {r['entries']} entries: {r['ok']} ok, {r['failed']} failed, "
