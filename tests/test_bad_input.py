@@ -11,6 +11,7 @@ code (libpng, OpenCV) would count as a second line.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import logging
 import os
@@ -653,3 +654,23 @@ def test_out_onto_a_file_is_refused_by_every_command(tmp_path, raw_date, capsys,
     code = main([command[0], source, "--out", str(blocker)] + command[1:])
     err = capsys.readouterr().err
     assert code == 2 and "--out" in err and "not a folder" in err and len(err.splitlines()) == 1
+
+
+# --- outputs: checked before the work; a failed write names the file ---------------------------
+
+def _no_space(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+def test_disk_full_names_the_file_being_written(capfd, tmp_path, rig, monkeypatch):
+    # Every text output is flushed to the disk (fsync) before it is renamed into place: a full
+    # disk fails there at the latest.
+    monkeypatch.setattr(os, "fsync", _no_space)
+    out = tmp_path / "o"
+    line = bad(capfd, "calibrate", rig, "--out", out, *FAST, "-q",
+               expect=(str(out), ": cannot write (No space left on device)"))
+    assert "result.json" in line and not (out / "result.json").exists()
+    init = tmp_path / "init.yaml"
+    bad(capfd, "perturb", rig, "--out", init,
+        expect=f"{init}: cannot write (No space left on device)")
+    assert not init.exists()

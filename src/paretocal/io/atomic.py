@@ -1,33 +1,60 @@
 """Atomic file output: write to a temporary file in the same folder, then rename.
 
 A reader never sees a half-written file, and an interrupted run leaves the previous version.
+A write that fails for a reason the user can fix (a full disk, a quota, a read-only file
+system, no permission) raises :class:`~paretocal.errors.InputError` naming the file.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import InputError
+
+#: Reasons a write fails that the user can fix: room on the disk or quota, a writable file
+#: system or folder, a file or link where a folder is expected, a shorter name. Anything else
+#: (an I/O error of the device, a bad descriptor) is left to surface as a bug.
+USER_WRITE_ERRORS = frozenset(getattr(errno, name) for name in (
+    "ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EACCES", "EPERM", "EISDIR", "ENOTDIR", "ELOOP",
+    "ENAMETOOLONG", "EEXIST") if hasattr(errno, name))
+
+
+def write_error(path: Path, exc: OSError) -> InputError:
+    """The one-line error for ``exc``, raised while writing ``path``."""
+    why = os.strerror(exc.errno) if exc.errno else str(exc)
+    return InputError(f"{path}: cannot write ({why})")
+
 
 @contextmanager
 def atomic_path(path: Path):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically."""
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
+
+    An :class:`OSError` of :data:`USER_WRITE_ERRORS` raised here or by the caller's writing
+    becomes an :class:`~paretocal.errors.InputError` naming ``path`` (not the temporary file).
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix,
-                               dir=path.parent)
-    os.close(fd)
-    # mkstemp creates 0600 files; give the result the permissions a plain open() would.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix,
+                                   dir=path.parent)
+        os.close(fd)
+        # mkstemp creates 0600 files; give the result the permissions a plain open() would.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         yield Path(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        if exc.errno not in USER_WRITE_ERRORS:
+            raise
+        raise write_error(path, exc) from None
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
 
 
