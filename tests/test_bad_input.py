@@ -674,3 +674,62 @@ def test_disk_full_names_the_file_being_written(capfd, tmp_path, rig, monkeypatc
     bad(capfd, "perturb", rig, "--out", init,
         expect=f"{init}: cannot write (No space left on device)")
     assert not init.exists()
+
+
+@pytest.mark.skipif(not _can_drop_root_bypass(),
+                    reason="running as root without setpriv: permissions do not apply")
+def test_unwritable_resume_folder_and_check_out(capfd, tmp_path, rig):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "run_args.json").write_text(json.dumps(
+        {"source": str(rig), "T_init": None, "settings": Settings().to_dict(), "figures": False}))
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    for d in (run_dir, ro):
+        d.chmod(0o555)
+    try:
+        code, _, err = run_without_root_bypass(capfd, "calibrate", "--resume", run_dir)
+        # check's --out is checked before anything is read: the missing source is not reached.
+        code2, _, err2 = run_without_root_bypass(capfd, "check", tmp_path / "no_source",
+                                                 "--extrinsic", tmp_path / "none.yaml",
+                                                 "--out", ro / "r.json")
+    finally:
+        for d in (run_dir, ro):
+            d.chmod(0o755)
+    assert code == 2 and err.strip() == (f"paretocal: error: --resume {run_dir}: no permission "
+                                         "to write there"), err
+    assert code2 == 2 and err2.strip() == (f"paretocal: error: --out {ro / 'r.json'}: no "
+                                           "permission to write there"), err2
+    assert sorted(p.name for p in run_dir.iterdir()) == ["run_args.json"] and not any(ro.iterdir())
+
+
+@pytest.mark.parametrize("command", ["check", "perturb"])
+def test_file_out_onto_a_directory(capfd, tmp_path, rig, raw_frames, command):
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    extra = []
+    if command == "check":
+        write_extrinsic(tmp_path / "e.yaml", raw_frames[0].T_ref)
+        extra = ["--extrinsic", tmp_path / "e.yaml"]
+    bad(capfd, command, rig, *extra, "--out", folder,
+        expect=f"--out {folder}: is a directory (give the name of the file to write)")
+    assert not any(folder.iterdir()) and not list(tmp_path.glob(".adir*"))
+
+
+@pytest.mark.parametrize("kind", ["dangling", "loop"])
+@pytest.mark.parametrize("command", [["calibrate"], ["check"], ["perturb"], ["depth"],
+                                     ["study", "--quick"]])
+def test_out_a_symlink_that_leads_nowhere(capfd, tmp_path, rig, raw_frames, command, kind):
+    link = tmp_path / "out"
+    if kind == "loop":
+        os.symlink(link.name, link)
+        expect = f"--out {link}: symlink loop"
+    else:
+        os.symlink(tmp_path / "gone" / "x", link)
+        expect = f"--out {link}: a symbolic link to {tmp_path / 'gone' / 'x'}, which does not exist"
+    extra = []
+    if command[0] == "check":
+        write_extrinsic(tmp_path / "e.yaml", raw_frames[0].T_ref)
+        extra = ["--extrinsic", tmp_path / "e.yaml"]
+    bad(capfd, command[0], rig, *command[1:], *extra, "--out", link, expect=expect)
+    assert link.is_symlink() and not (tmp_path / "gone").exists()      # left as it was

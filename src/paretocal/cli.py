@@ -284,9 +284,11 @@ def verdict_line(reliability: dict) -> str:
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
+    from .io.atomic import check_output_dir
     from .rundir import run_arguments
 
     args = run_arguments(run_dir)              # a one-line error before anything is loaded
+    check_output_dir(run_dir, "--resume")
     _run_calibration(None, args["source"], args["T_init"], args["settings"], run_dir,
                      args["figures"], quiet, max(checkpoint_every, 1), strict, resume=True)
 
@@ -308,9 +310,11 @@ def perturb(
     """
     from .geometry import decalibrate, pose_error
     from .io import detect_source, write_extrinsic
+    from .io.atomic import check_output_file
 
     if rot < 0 or trans < 0:
         raise SettingsError("--rot and --trans must not be negative")
+    check_output_file(out)
     src = detect_source(source, camera)
     T_ref = src.frames[0].T_ref
     if T_ref is None:
@@ -346,11 +350,13 @@ def check(
     from .check import check_extrinsic
     from .config import load_settings
     from .io import load_frames, read_extrinsic
-    from .io.atomic import atomic_write_text
+    from .io.atomic import atomic_write_text, check_output_file
 
     _setup_logging(verbose, quiet)
     if rot_tol <= 0 or trans_tol <= 0:
         raise SettingsError("--rot-tol and --trans-tol must be positive")
+    if out is not None:
+        check_output_file(out)
     settings = load_settings(config)
     T = read_extrinsic(extrinsic)
     loaded = load_frames(source, frames, camera)
