@@ -716,6 +716,20 @@ def test_file_out_onto_a_directory(capfd, tmp_path, rig, raw_frames, command):
     assert not any(folder.iterdir()) and not list(tmp_path.glob(".adir*"))
 
 
+@pytest.mark.parametrize("args, expect", [
+    (["--rot", "nan"], "--rot nan: must be a finite number"),
+    (["--rot", "inf"], "--rot inf: must be a finite number"),
+    (["--trans", "nan"], "--trans nan: must be a finite number"),
+    (["--trans", "-inf"], "--trans -inf: must be a finite number"),
+    (["--rot", "-1"], "--rot -1: must not be negative"),
+    (["--rot", "200"], "--rot 200: at most 180 degrees per axis"),
+    (["--trans", "1e308"], "--trans 1e+308: too large (the box +-TRANS must have a finite width)"),
+])
+def test_perturb_bounds(capfd, tmp_path, rig, args, expect):
+    bad(capfd, "perturb", rig, "--out", tmp_path / "p.yaml", *args, expect=expect)
+    assert not (tmp_path / "p.yaml").exists()
+
+
 @pytest.mark.parametrize("kind", ["dangling", "loop"])
 @pytest.mark.parametrize("command", [["calibrate"], ["check"], ["perturb"], ["depth"],
                                      ["study", "--quick"]])

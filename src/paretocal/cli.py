@@ -312,8 +312,7 @@ def perturb(
     from .io import detect_source, write_extrinsic
     from .io.atomic import check_output_file
 
-    if rot < 0 or trans < 0:
-        raise SettingsError("--rot and --trans must not be negative")
+    _check_perturbation(rot, trans)
     check_output_file(out)
     src = detect_source(source, camera)
     T_ref = src.frames[0].T_ref
@@ -328,6 +327,24 @@ def perturb(
         f"error vs reference: {e['rotation_deg']:.3f} deg, {e['translation_cm']:.2f} cm"))
     typer.echo(f"paretocal: wrote {out} ({_fmt_err({k: float(v) for k, v in e.items()})} "
                "from the reference)")
+
+
+def _check_perturbation(rot: float, trans: float) -> None:
+    """``perturb``'s bounds: finite and not negative; a rotation within a half turn (a larger
+    per-axis angle only repeats the same rotations) and a translation whose box +-TRANS spans
+    a finite range of floats (the uniform draw needs its width)."""
+    import math
+
+    for name, value in (("--rot", rot), ("--trans", trans)):
+        if not math.isfinite(value):
+            raise SettingsError(f"{name} {value}: must be a finite number")
+        if value < 0:
+            raise SettingsError(f"{name} {value:g}: must not be negative")
+    if rot > 180:
+        raise SettingsError(f"--rot {rot:g}: at most 180 degrees per axis")
+    if not math.isfinite(2.0 * trans):
+        raise SettingsError(f"--trans {trans:g}: too large (the box +-TRANS must have a "
+                            "finite width)")
 
 
 @app.command()
