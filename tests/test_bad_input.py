@@ -28,6 +28,7 @@ import yaml
 
 from paretocal.cli import main
 from paretocal.config import Settings
+from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
@@ -747,3 +748,47 @@ def test_out_a_symlink_that_leads_nowhere(capfd, tmp_path, rig, raw_frames, comm
         extra = ["--extrinsic", tmp_path / "e.yaml"]
     bad(capfd, command[0], rig, *command[1:], *extra, "--out", link, expect=expect)
     assert link.is_symlink() and not (tmp_path / "gone").exists()      # left as it was
+
+
+def _alias_bomb(last: str) -> str:
+    """The "billion laughs": nine anchors, each a list of nine aliases of the one before
+    (about 340 bytes, 387 million values expanded), and ``last`` using the top one (&i)."""
+    lines = ['a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for prev, name in zip("abcdefgh", "bcdefghi"):
+        lines.append(f"{name}: &{name} [{', '.join(['*' + prev] * 9)}]")
+    return "\n".join(lines + [last]) + "\n"
+
+
+@pytest.mark.parametrize("where", ["calib.yaml", "--config", "--init"])
+def test_yaml_alias_bomb_is_refused(capfd, tmp_path, rig, where):
+    extra = []
+    if where == "calib.yaml":
+        path = rig / "calib.yaml"
+        path.write_text(_alias_bomb(path.read_text().replace("T_cam_lidar:", "x:")
+                                    + "T_cam_lidar: *i"))
+    else:
+        path = tmp_path / "bomb.yaml"
+        path.write_text(_alias_bomb("T_cam_lidar: *i" if where == "--init"
+                                    else "search: {pop: *i}"))
+        extra = [where, path]
+    assert len(path.read_bytes()) < 2000
+    tracemalloc.start()
+    try:
+        bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *extra, *FAST,
+            expect=f"{path}: its YAML aliases expand it to more than 1,000,000 values")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 100 * 2**20, f"peak {peak / 2**20:.0f} MB"        # nothing was expanded
+
+
+def test_yaml_aliases_that_stay_small_are_read(tmp_path, raw_frames):
+    from paretocal.io import read_extrinsic
+
+    rows = json.dumps(raw_frames[0].T_ref.tolist())
+    path = tmp_path / "init.yaml"
+    path.write_text(f"T: &t {rows}\nT_cam_lidar: *t\ncopies: [*t, *t, *t]\n")
+    np.testing.assert_allclose(read_extrinsic(path), raw_frames[0].T_ref, atol=1e-12)
+    path.write_text("a: &a [1, *a]\nT_cam_lidar: *a\n")
+    with pytest.raises(ParetocalError, match="refers to a structure that contains it"):
+        read_extrinsic(path)

@@ -939,6 +939,65 @@ def calib_matrix(calib: dict[str, np.ndarray], key: str, shape: tuple[int, int],
     return m
 
 
+#: Most values (scalars, lists and mappings) a YAML file may hold once its aliases are expanded.
+#: A value costs at most about 100 bytes as a Python object (8 as a number in numpy), so one
+#: file can make the readers build at most about 100 MB; the files paretocal reads (calib.yaml,
+#: camera_info, --config, --init) hold a few hundred values. Aliases themselves are allowed:
+#: only their expansion is bounded ("billion laughs": nine nested anchors of nine aliases each
+#: are 340 bytes of text and 387 million values, which numpy turns into 2.9 GB).
+MAX_YAML_VALUES = 1_000_000
+
+
+class _AliasBomb(Exception):
+    """A YAML document whose aliases expand beyond :data:`MAX_YAML_VALUES`, or refer to
+    themselves."""
+
+
+def _expanded_size(node, sizes: dict, open_: set) -> int:
+    """Values in ``node`` with every alias expanded (memoised per node, so linear in the
+    document's own nodes however often they are referred to)."""
+    key = id(node)
+    if key in sizes:
+        return sizes[key]
+    if key in open_:
+        raise _AliasBomb("a YAML alias refers to a structure that contains it (a recursive "
+                         "document); write the values out instead")
+    open_.add(key)
+    n = 1
+    if isinstance(node, yaml.SequenceNode):
+        n += sum(_expanded_size(v, sizes, open_) for v in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        n += sum(_expanded_size(k, sizes, open_) + _expanded_size(v, sizes, open_)
+                 for k, v in node.value)
+    open_.discard(key)
+    sizes[key] = n
+    if n > MAX_YAML_VALUES:
+        raise _AliasBomb(f"its YAML aliases expand it to more than {MAX_YAML_VALUES:,} values "
+                         "(an alias bomb?); write the values out instead of repeating anchors")
+    return n
+
+
+def load_yaml(text: str, path: Path | str):
+    """``yaml.safe_load`` of ``text`` that refuses alias bombs quickly, naming ``path``.
+
+    A document whose anchors and aliases expand beyond :data:`MAX_YAML_VALUES` values (or
+    refer to themselves) raises :class:`InputError` before anything is built from it; YAML
+    syntax errors propagate as :class:`yaml.YAMLError` for the caller to word.
+    """
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        try:
+            _expanded_size(node, {}, set())
+        except _AliasBomb as exc:
+            raise InputError(f"{path}: {exc}") from None
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
 def read_mapping(path: Path) -> dict:
     """Read a YAML or JSON file whose top level is a mapping."""
     path = Path(path)
@@ -951,7 +1010,7 @@ def read_mapping(path: Path) -> dict:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
     try:
-        data = json.loads(text) if kind == "JSON" else yaml.safe_load(text)
+        data = json.loads(text) if kind == "JSON" else load_yaml(text, path)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
