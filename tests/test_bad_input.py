@@ -792,3 +792,28 @@ def test_yaml_aliases_that_stay_small_are_read(tmp_path, raw_frames):
     path.write_text("a: &a [1, *a]\nT_cam_lidar: *a\n")
     with pytest.raises(ParetocalError, match="refers to a structure that contains it"):
         read_extrinsic(path)
+
+
+# --- symbolic links in the source that lead nowhere -------------------------------------------
+
+@pytest.mark.parametrize("target, what", [
+    ("", "source folder"), ("calib.yaml", "file"), ("images", "image folder"),
+    ("points/{stem}.bin", "point cloud file"), ("images/{stem}.png", "image file")])
+def test_symlink_loops_in_the_source_are_named(capfd, tmp_path, rig, raw_frames, target, what):
+    path = rig / target.format(stem=_stem(raw_frames)) if target else tmp_path / "loop"
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
+    os.symlink(path.name, path)                    # a link to itself
+    bad(capfd, "calibrate", rig if target else path, "--out", tmp_path / "o", *FAST,
+        expect=f"{path}: {what} not reachable: symlink loop")
+
+
+def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames):
+    path = rig / "points" / f"{_stem(raw_frames)}.bin"
+    path.unlink()
+    os.symlink(tmp_path / "moved.bin", path)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(f"{path}: point cloud file not reachable: a symbolic link to "
+                f"{tmp_path / 'moved.bin'}, which does not exist"))

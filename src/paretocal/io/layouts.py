@@ -18,6 +18,7 @@ from ..camera import Camera
 from ..errors import InputError, SettingsError
 from ..geometry import check_rigid
 from .frame import Frame
+from .paths import missing, not_found
 from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
                       read_cloud, read_image, read_kitti_calib, read_mapping)
 
@@ -78,9 +79,9 @@ def _pair(root: Path, image_dir: Path, points_dir: Path,
     """Pair images and point clouds by stem; fail if the folders share no stem."""
     image_dir, points_dir = _link_file(image_dir), _link_file(points_dir)
     if not image_dir.is_dir():
-        raise InputError(f"{image_dir}: image folder not found")
+        raise InputError(not_found(image_dir, "image folder"))
     if not points_dir.is_dir():
-        raise InputError(f"{points_dir}: point cloud folder not found")
+        raise InputError(not_found(points_dir, "point cloud folder"))
     images = {p.stem: p for p in _listdir(image_dir) if p.suffix.lower() in image_suffixes}
     points = {p.stem: p for p in _listdir(points_dir) if p.suffix.lower() in point_suffixes}
     common = sorted(set(images) & set(points))
@@ -325,7 +326,7 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
                              "file (relative to the folder)")
         ipath = root / ref
         if not ipath.is_file():
-            raise InputError(f"{cpath}: camera_info file {ipath} not found")
+            raise InputError(f"{cpath}: camera_info file {ipath} {missing(ipath)}")
         return _camera_info(ipath, read_mapping(ipath))
     cam = data.get("camera")
     if not isinstance(cam, dict):
@@ -358,7 +359,7 @@ def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndar
                          "folder), nonzero on usable pixels")
     mpath = root / ref
     if not mpath.is_file():
-        raise InputError(f"{cpath}: {key} file {mpath} not found")
+        raise InputError(f"{cpath}: {key} file {mpath} {missing(mpath)}")
     img = decode_image(mpath)
     if img.shape[:2] != (camera.height, camera.width):
         raise InputError(f"{mpath}: mask is {img.shape[1]}x{img.shape[0]} but the calibration "
@@ -425,13 +426,13 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
     """Detect the layout of ``source`` and list its frames (nothing heavy is read yet)."""
     root = Path(source)
     if not root.exists():
-        raise InputError(f"{root}: source folder not found")
+        raise InputError(not_found(root, "source folder"))
     if not root.is_dir():
         raise InputError(f"{root}: source must be a folder")
     if not 0 <= camera_index <= 3:
         raise SettingsError(f"--camera {camera_index}: must be 0, 1, 2 or 3")
-    if (root / "calib.yaml").is_file():
-        return _folder(root)
+    if (root / "calib.yaml").is_file() or (root / "calib.yaml").is_symlink():
+        return _folder(root)      # a broken link there is the folder's calib.yaml, unreadable
     if (root / "training").is_dir() and not (root / "velodyne").is_dir():
         root = root / "training"
     if (root / "velodyne").is_dir() and (root / "calib").is_dir():

@@ -46,3 +46,14 @@ def broken_link(path: Path) -> str | None:
     return "symlink loop" if loop else None
 
 
+
+def missing(path: Path) -> str:
+    """Why ``path`` cannot be opened, for a message: "not found", or "not reachable: ..." when
+    a symbolic link on the way leads nowhere (:func:`broken_link`)."""
+    link = broken_link(path)
+    return f"not reachable: {link}" if link else "not found"
+
+
+def not_found(path: Path, what: str) -> str:
+    """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere."""
+    return f"{path}: {what} {missing(path)}"

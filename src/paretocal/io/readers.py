@@ -54,6 +54,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from .paths import not_found
 
 log = logging.getLogger(__name__)
 
@@ -815,7 +816,7 @@ def _require_file(path: Path, what: str) -> None:
         raise InputError(f"{path}: {what} expected, but this is a folder")
     if path.exists():
         raise InputError(f"{path}: {what} expected, but this is not a regular file")
-    raise InputError(f"{path}: {what} not found")
+    raise InputError(not_found(path, what))
 
 
 @contextlib.contextmanager
