@@ -347,6 +347,22 @@ def test_unpaired_files_are_named_in_a_warning(tmp_path, rig, raw_frames, caplog
     assert "1 point clouds without a partner" in caplog.text and "(extra)" in caplog.text
 
 
+@pytest.mark.parametrize("folder, suffixes, what", [("images", (".jpg", ".png"), "images"),
+                                                    ("points", (".bin", ".npy"), "point clouds")])
+def test_two_files_for_one_frame_are_named(capfd, tmp_path, rig, raw_frames, folder, suffixes,
+                                           what):
+    stem = _stem(raw_frames, 1)
+    extra = rig / folder / f"{stem}{suffixes[0] if folder == 'images' else suffixes[1]}"
+    if folder == "images":
+        cv2.imwrite(str(extra), raw_frames[1].image)
+    else:
+        np.save(extra, raw_frames[1].points)
+    a, b = (rig / folder / f"{stem}{s}" for s in suffixes)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=f"{a} and {b}: 2 {what} for frame {stem}; a frame has one image and one point "
+               "cloud: remove or rename the others")
+
+
 @pytest.mark.parametrize("spec, expect", [
     ("5:9", "--frames 5:9: selects no frame (the source has 3)"),
     (",", "--frames ,: selects no frame"),

@@ -82,18 +82,36 @@ def _pair(root: Path, image_dir: Path, points_dir: Path,
         raise InputError(not_found(image_dir, "image folder"))
     if not points_dir.is_dir():
         raise InputError(not_found(points_dir, "point cloud folder"))
-    images = {p.stem: p for p in _listdir(image_dir) if p.suffix.lower() in image_suffixes}
-    points = {p.stem: p for p in _listdir(points_dir) if p.suffix.lower() in point_suffixes}
+    images = _by_stem(_listdir(image_dir), image_suffixes)
+    points = _by_stem(_listdir(points_dir), point_suffixes)
     common = sorted(set(images) & set(points))
     if not common:
         raise InputError(f"{root}: no frame pairs: {len(images)} images in {image_dir} and "
                          f"{len(points)} point clouds in {points_dir} share no file stem")
+    # Which of two files of one frame is meant cannot be guessed.
+    for what, found in (("images", images), ("point clouds", points)):
+        twice = [s for s in common if len(found[s]) > 1]
+        if twice:
+            files = " and ".join(str(p) for p in found[twice[0]])
+            more = f" (and {len(twice) - 1} more frames like it)" if len(twice) > 1 else ""
+            raise InputError(f"{files}: {len(found[twice[0]])} {what} for frame {twice[0]}"
+                             f"{more}; a frame has one image and one point cloud: remove or "
+                             "rename the others")
     for what, lone, folder in (("images", sorted(set(images) - set(points)), points_dir),
                                ("point clouds", sorted(set(points) - set(images)), image_dir)):
         if lone:
             log.warning("%s: %d %s without a partner in %s, skipped (%s%s)", root, len(lone),
                         what, folder, ", ".join(lone[:5]), ", ..." if len(lone) > 5 else "")
-    return [(s, images[s], points[s]) for s in common]
+    return [(s, images[s][0], points[s][0]) for s in common]
+
+
+def _by_stem(paths: list[Path], suffixes) -> dict[str, list[Path]]:
+    """The files with one of ``suffixes`` (any case), grouped by stem."""
+    out: dict[str, list[Path]] = {}
+    for p in paths:
+        if p.suffix.lower() in suffixes:
+            out.setdefault(p.stem, []).append(p)
+    return out
 
 
 def _listdir(folder: Path) -> list[Path]:
