@@ -531,6 +531,43 @@ def test_one_sparse_frame_among_good_ones_is_a_warning(raw_frames, caplog):
     assert "fewer than 30 LiDAR feature points in view" in caplog.text
 
 
+#: FAST with the polish and the re-selection of the feature points at the estimate.
+POLISHED = [a for a in FAST if a != "--no-polish"]
+
+
+def _no_polish(objective, X, F, *args):
+    return X, F, 0
+
+
+def test_no_points_in_view_after_the_reselection_names_that_stage(capfd, tmp_path, rig,
+                                                                   monkeypatch):
+    """The search reaches a pose that sees none of the points (forced here: the estimate is
+    turned 180 deg about the LiDAR's vertical axis, and the clouds hold the camera's half
+    only): the message names the re-selection and how far its pose is from the start, and
+    does not blame --init."""
+    import paretocal.pipeline as pipeline
+
+    for p in (rig / "points").iterdir():
+        pts = np.fromfile(p, np.float32).reshape(-1, 4)
+        pts[pts[:, 0] > 0].tofile(p)
+
+    def turned_around(objective, X, F, *args):
+        X = X.copy()
+        X[:, :6] = [0, 0, 0, 180.0, 0, 0]                # x, y, z (m), yaw, pitch, roll (deg)
+        return X, F, None, 0
+
+    monkeypatch.setattr(pipeline, "polish_front", _no_polish)
+    monkeypatch.setattr(pipeline, "prefer_near", turned_around)
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *POLISHED,
+               expect=("too few LiDAR feature points in view after re-selecting points at the "
+                       "estimate (180.0 deg, 0 cm from the initial extrinsic) (fewer than 30 per "
+                       "frame", "nearly every point is behind it",
+                       "the search moved the extrinsic away from where the frames' points are "
+                       "in view"))
+    assert "turned 180 deg" not in line and "at the initial extrinsic (" not in line
+    assert not (tmp_path / "o").exists()
+
+
 # --- the reliability verdict ----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
