@@ -568,6 +568,26 @@ def test_no_points_in_view_after_the_reselection_names_that_stage(capfd, tmp_pat
     assert not (tmp_path / "o").exists()
 
 
+def test_frame_warnings_are_said_once(capfd, tmp_path, rig, raw_frames, monkeypatch):
+    """An image without a partner (said when the source is detected, which the command line
+    did twice) and a sparse frame (said by the scene check, which the re-selection of the
+    feature points ran again): one line each."""
+    import paretocal.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "polish_front", _no_polish)       # the re-selection stays
+    monkeypatch.setattr(pipeline, "prefer_near", lambda objective, X, F, *a: (X, F, None, 0))
+    shutil.copy(rig / "images" / f"{_stem(raw_frames, 0)}.png", rig / "images" / "lonely.png")
+    p = rig / "points" / f"{_stem(raw_frames, 1)}.bin"
+    np.fromfile(p, np.float32).reshape(-1, 4)[::2000].tofile(p)
+    code, _, err = run(capfd, "calibrate", rig, "--out", tmp_path / "o", *POLISHED,
+                       "--frames", "0:3")
+    assert code == 0, err
+    lines = err.strip().splitlines()
+    assert sum("1 images without a partner" in line for line in lines) == 1, err
+    assert sum(f"frame(s) {_stem(raw_frames, 1)} (" in line for line in lines) == 1, err
+    assert len(lines) == len(set(lines)), err
+
+
 # --- the reliability verdict ----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")

@@ -91,18 +91,20 @@ class _Progress:
 
 def _dataset_options(settings, source, take_init_error: bool):
     """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
-    line or the config file already set them."""
+    line or the config file already set them; returns ``(settings, detected source)``, the
+    source to load the frames from (detected once: its warnings are said once)."""
     from .config import SearchSettings
     from .io import detect_source
 
-    opts = detect_source(Path(source), settings.camera).options
+    detected = detect_source(Path(source), settings.camera)
+    opts = detected.options
     s = settings.search
     if (take_init_error and "init_error" in opts
             and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
                                                        SearchSettings.init_error_m)):
         deg, m = opts["init_error"]
         settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
-    return settings
+    return settings, detected
 
 
 def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
@@ -223,11 +225,11 @@ def calibrate(
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
-    settings = _dataset_options(settings, source, err_deg is None)
+    settings, detected = _dataset_options(settings, source, err_deg is None)
     settings.validate()
     check_output_dir(out)
     T_init = read_extrinsic(init) if init is not None else None
-    loaded = load_frames(source, settings.frames, settings.camera)
+    loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                      strict)
 

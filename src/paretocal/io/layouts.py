@@ -535,14 +535,16 @@ def read_frame(files: FrameFiles) -> Frame:
                  sensor_pose=files.sensor_pose)
 
 
-def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) -> list[Frame]:
+def load_frames(source: str | Path | Source, frames: str | None = None,
+                camera: int = 2) -> list[Frame]:
     """Detect the layout of ``source`` and read the selected frames.
 
     Parameters
     ----------
-    source : path
+    source : path or Source
         A KITTI raw drive (or date) folder, a KITTI object ``training`` folder, or a generic
-        folder with ``calib.yaml`` (docs/conventions.md section 2).
+        folder with ``calib.yaml`` (docs/conventions.md section 2); or a source already
+        detected (:func:`detect_source`, whose warnings are then not said again).
     frames : str, optional
         Selection spec (``0:10``, ``0,3,7``, stems); all frames by default.
     camera : int
@@ -552,7 +554,7 @@ def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) 
     -------
     list of Frame
     """
-    src = detect_source(Path(source), camera)
+    src = source if isinstance(source, Source) else detect_source(Path(source), camera)
     idx = select_frames([f.name for f in src.frames], frames)
     out = [read_frame(src.frames[i]) for i in idx]
     # The readers note what they could not find (no intensity field, an odd time unit) per
