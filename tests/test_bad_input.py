@@ -397,6 +397,56 @@ def test_out_of_range_options(capfd, tmp_path, rig, args, expect):
     assert not (tmp_path / "o").exists()                # nothing written
 
 
+def _memory_available(monkeypatch, nbytes):
+    import psutil
+
+    monkeypatch.setattr(psutil, "virtual_memory", lambda: SimpleNamespace(available=nbytes))
+
+
+def test_population_beyond_memory(capfd, tmp_path, rig, monkeypatch):
+    # The machine's memory is fixed here, so that the outcome does not depend on the machine.
+    _memory_available(monkeypatch, 16 * 10**9)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, "--pop", "100000000",
+        expect="--pop 100000000: the search needs at least 80.0 GB (800 bytes per individual "
+               "on 1 frame: the population, its offspring and their evaluation), more than the "
+               "16.0 GB of memory available")
+    # A population that fits one frame but not the frames selected: refused once they are
+    # counted, before any feature is extracted.
+    _memory_available(monkeypatch, 10**9)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, "--pop", "1000000",
+        "--frames", "0:3", expect="--pop 1000000: the search needs at least 1.4 GB (1376 "
+                                  "bytes per individual on 3 frames")
+    assert not (tmp_path / "o").exists()
+
+
+def test_search_memory_per_individual_is_what_the_bound_says(raw_frames):
+    """One NSGA-II generation holds at most SEARCH_BYTES_PER_INDIVIDUAL(_FRAME) per individual
+    (measured), and not much less (the bound would refuse populations that fit)."""
+    from paretocal.config import (SEARCH_BYTES_PER_INDIVIDUAL,
+                                  SEARCH_BYTES_PER_INDIVIDUAL_FRAME, SearchSettings)
+    from paretocal.search.lean import LeanNSGA2
+    from paretocal.search.nsga import initial_population
+    from paretocal.search.problem import bounds, round_n
+    from paretocal.stage import Stage
+
+    settings = Settings().replace(objective={"evaluator": "numba"})
+    frames = raw_frames[:2]
+    stage = Stage(frames, frames[0].T_ref, frames[0].T_ref, settings)
+    pop = 4000
+    xl, xu = bounds(settings.search, stage.n_min, stage.n_max)
+    X0 = initial_population(SearchSettings(pop=pop), xl, xu)
+    engine = LeanNSGA2(stage.objective.evaluate, xl, xu, pop, lambda X: round_n(X, xl, xu))
+    engine.step(engine.start(X0[:8], 0))                 # compiled and warm
+    tracemalloc.start()
+    try:
+        engine.step(engine.start(X0, 0))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    model = SEARCH_BYTES_PER_INDIVIDUAL + SEARCH_BYTES_PER_INDIVIDUAL_FRAME * len(frames)
+    assert peak / pop <= model <= 1.25 * peak / pop, (peak / pop, model)
+
+
 @pytest.mark.parametrize("args, expect", [
     (["--n-max", "100000"], "--n-max 100000: the frames hold at most"),
     (["--n-min", "100000"], "--n-min 100000 is larger than the largest n"),

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Settings
+from .config import Settings, check_population_memory
 from .decide import decide, reprojection_deviation
 from .errors import InputError, SettingsError
 from .features.lidar import GROUP_NAMES
@@ -65,6 +65,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     report = _reporter(progress)
     with _timed(timings, "load"):
         frames = _load(source, settings)
+    check_population_memory(settings.search.pop, len(frames))
     T_init, T_ref = resolve_init(frames, T_init)
     with _timed(timings, "lidar_pose"):
         frames, lidar_info, first_rings = locate_lidar(frames, settings)
