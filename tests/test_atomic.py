@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import errno
+import os
 import threading
 
 import pytest
 
+from paretocal.errors import InputError
 from paretocal.io.atomic import atomic_path, atomic_write_text
 
 
@@ -70,3 +73,21 @@ def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_
     text = (out / "result.json").read_text()
     assert text == before or json.loads(text)["wall_s"] == pytest.approx(r.wall_s, abs=1e-3)
     assert not [p for p in out.iterdir() if ".tmp" in p.name]
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES])
+def test_a_write_the_user_can_fix_names_the_file(tmp_path, code):
+    target = tmp_path / "sub" / "result.json"
+    with pytest.raises(InputError) as err:
+        with atomic_path(target) as tmp:
+            tmp.write_text("partial")
+            raise OSError(code, os.strerror(code))
+    assert str(err.value) == f"{target}: cannot write ({os.strerror(code)})"
+    assert not target.exists() and list(target.parent.iterdir()) == []    # no temporary left
+
+
+def test_other_os_errors_stay_bugs(tmp_path):
+    with pytest.raises(OSError) as err:
+        with atomic_path(tmp_path / "x.csv"):
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+    assert not isinstance(err.value, InputError) and err.value.errno == errno.EIO

@@ -11,6 +11,7 @@ code (libpng, OpenCV) would count as a second line.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import logging
 import os
@@ -27,6 +28,7 @@ import yaml
 
 from paretocal.cli import main
 from paretocal.config import Settings
+from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
@@ -345,6 +347,22 @@ def test_unpaired_files_are_named_in_a_warning(tmp_path, rig, raw_frames, caplog
     assert "1 point clouds without a partner" in caplog.text and "(extra)" in caplog.text
 
 
+@pytest.mark.parametrize("folder, suffixes, what", [("images", (".jpg", ".png"), "images"),
+                                                    ("points", (".bin", ".npy"), "point clouds")])
+def test_two_files_for_one_frame_are_named(capfd, tmp_path, rig, raw_frames, folder, suffixes,
+                                           what):
+    stem = _stem(raw_frames, 1)
+    extra = rig / folder / f"{stem}{suffixes[0] if folder == 'images' else suffixes[1]}"
+    if folder == "images":
+        cv2.imwrite(str(extra), raw_frames[1].image)
+    else:
+        np.save(extra, raw_frames[1].points)
+    a, b = (rig / folder / f"{stem}{s}" for s in suffixes)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=f"{a} and {b}: 2 {what} for frame {stem}; a frame has one image and one point "
+               "cloud: remove or rename the others")
+
+
 @pytest.mark.parametrize("spec, expect", [
     ("5:9", "--frames 5:9: selects no frame (the source has 3)"),
     (",", "--frames ,: selects no frame"),
@@ -377,6 +395,56 @@ def test_frames_selecting_nothing(capfd, tmp_path, rig, spec, expect):
 def test_out_of_range_options(capfd, tmp_path, rig, args, expect):
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, *args, expect=expect)
     assert not (tmp_path / "o").exists()                # nothing written
+
+
+def _memory_available(monkeypatch, nbytes):
+    import psutil
+
+    monkeypatch.setattr(psutil, "virtual_memory", lambda: SimpleNamespace(available=nbytes))
+
+
+def test_population_beyond_memory(capfd, tmp_path, rig, monkeypatch):
+    # The machine's memory is fixed here, so that the outcome does not depend on the machine.
+    _memory_available(monkeypatch, 16 * 10**9)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, "--pop", "100000000",
+        expect="--pop 100000000: the search needs at least 80.0 GB (800 bytes per individual "
+               "on 1 frame: the population, its offspring and their evaluation), more than the "
+               "16.0 GB of memory available")
+    # A population that fits one frame but not the frames selected: refused once they are
+    # counted, before any feature is extracted.
+    _memory_available(monkeypatch, 10**9)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, "--pop", "1000000",
+        "--frames", "0:3", expect="--pop 1000000: the search needs at least 1.4 GB (1376 "
+                                  "bytes per individual on 3 frames")
+    assert not (tmp_path / "o").exists()
+
+
+def test_search_memory_per_individual_is_what_the_bound_says(raw_frames):
+    """One NSGA-II generation holds at most SEARCH_BYTES_PER_INDIVIDUAL(_FRAME) per individual
+    (measured), and not much less (the bound would refuse populations that fit)."""
+    from paretocal.config import (SEARCH_BYTES_PER_INDIVIDUAL,
+                                  SEARCH_BYTES_PER_INDIVIDUAL_FRAME, SearchSettings)
+    from paretocal.search.lean import LeanNSGA2
+    from paretocal.search.nsga import initial_population
+    from paretocal.search.problem import bounds, round_n
+    from paretocal.stage import Stage
+
+    settings = Settings().replace(objective={"evaluator": "numba"})
+    frames = raw_frames[:2]
+    stage = Stage(frames, frames[0].T_ref, frames[0].T_ref, settings)
+    pop = 4000
+    xl, xu = bounds(settings.search, stage.n_min, stage.n_max)
+    X0 = initial_population(SearchSettings(pop=pop), xl, xu)
+    engine = LeanNSGA2(stage.objective.evaluate, xl, xu, pop, lambda X: round_n(X, xl, xu))
+    engine.step(engine.start(X0[:8], 0))                 # compiled and warm
+    tracemalloc.start()
+    try:
+        engine.step(engine.start(X0, 0))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    model = SEARCH_BYTES_PER_INDIVIDUAL + SEARCH_BYTES_PER_INDIVIDUAL_FRAME * len(frames)
+    assert peak / pop <= model <= 1.25 * peak / pop, (peak / pop, model)
 
 
 @pytest.mark.parametrize("args, expect", [
@@ -511,6 +579,63 @@ def test_one_sparse_frame_among_good_ones_is_a_warning(raw_frames, caplog):
         check_scene(feats, frames, T)
     assert f"frame(s) {raw_frames[1].name} (" in caplog.text
     assert "fewer than 30 LiDAR feature points in view" in caplog.text
+
+
+#: FAST with the polish and the re-selection of the feature points at the estimate.
+POLISHED = [a for a in FAST if a != "--no-polish"]
+
+
+def _no_polish(objective, X, F, *args):
+    return X, F, 0
+
+
+def test_no_points_in_view_after_the_reselection_names_that_stage(capfd, tmp_path, rig,
+                                                                   monkeypatch):
+    """The search reaches a pose that sees none of the points (forced here: the estimate is
+    turned 180 deg about the LiDAR's vertical axis, and the clouds hold the camera's half
+    only): the message names the re-selection and how far its pose is from the start, and
+    does not blame --init."""
+    import paretocal.pipeline as pipeline
+
+    for p in (rig / "points").iterdir():
+        pts = np.fromfile(p, np.float32).reshape(-1, 4)
+        pts[pts[:, 0] > 0].tofile(p)
+
+    def turned_around(objective, X, F, *args):
+        X = X.copy()
+        X[:, :6] = [0, 0, 0, 180.0, 0, 0]                # x, y, z (m), yaw, pitch, roll (deg)
+        return X, F, None, 0
+
+    monkeypatch.setattr(pipeline, "polish_front", _no_polish)
+    monkeypatch.setattr(pipeline, "prefer_near", turned_around)
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *POLISHED,
+               expect=("too few LiDAR feature points in view after re-selecting points at the "
+                       "estimate (180.0 deg, 0 cm from the initial extrinsic) (fewer than 30 per "
+                       "frame", "nearly every point is behind it",
+                       "the search moved the extrinsic away from where the frames' points are "
+                       "in view"))
+    assert "turned 180 deg" not in line and "at the initial extrinsic (" not in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_frame_warnings_are_said_once(capfd, tmp_path, rig, raw_frames, monkeypatch):
+    """An image without a partner (said when the source is detected, which the command line
+    did twice) and a sparse frame (said by the scene check, which the re-selection of the
+    feature points ran again): one line each."""
+    import paretocal.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "polish_front", _no_polish)       # the re-selection stays
+    monkeypatch.setattr(pipeline, "prefer_near", lambda objective, X, F, *a: (X, F, None, 0))
+    shutil.copy(rig / "images" / f"{_stem(raw_frames, 0)}.png", rig / "images" / "lonely.png")
+    p = rig / "points" / f"{_stem(raw_frames, 1)}.bin"
+    np.fromfile(p, np.float32).reshape(-1, 4)[::2000].tofile(p)
+    code, _, err = run(capfd, "calibrate", rig, "--out", tmp_path / "o", *POLISHED,
+                       "--frames", "0:3")
+    assert code == 0, err
+    lines = err.strip().splitlines()
+    assert sum("1 images without a partner" in line for line in lines) == 1, err
+    assert sum(f"frame(s) {_stem(raw_frames, 1)} (" in line for line in lines) == 1, err
+    assert len(lines) == len(set(lines)), err
 
 
 # --- the reliability verdict ----------------------------------------------------------------------
@@ -653,3 +778,165 @@ def test_out_onto_a_file_is_refused_by_every_command(tmp_path, raw_date, capsys,
     code = main([command[0], source, "--out", str(blocker)] + command[1:])
     err = capsys.readouterr().err
     assert code == 2 and "--out" in err and "not a folder" in err and len(err.splitlines()) == 1
+
+
+# --- outputs: checked before the work; a failed write names the file ---------------------------
+
+def _no_space(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+def test_disk_full_names_the_file_being_written(capfd, tmp_path, rig, monkeypatch):
+    # Every text output is flushed to the disk (fsync) before it is renamed into place: a full
+    # disk fails there at the latest.
+    monkeypatch.setattr(os, "fsync", _no_space)
+    out = tmp_path / "o"
+    line = bad(capfd, "calibrate", rig, "--out", out, *FAST, "-q",
+               expect=(str(out), ": cannot write (No space left on device)"))
+    assert "result.json" in line and not (out / "result.json").exists()
+    init = tmp_path / "init.yaml"
+    bad(capfd, "perturb", rig, "--out", init,
+        expect=f"{init}: cannot write (No space left on device)")
+    assert not init.exists()
+
+
+@pytest.mark.skipif(not _can_drop_root_bypass(),
+                    reason="running as root without setpriv: permissions do not apply")
+def test_unwritable_resume_folder_and_check_out(capfd, tmp_path, rig):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "run_args.json").write_text(json.dumps(
+        {"source": str(rig), "T_init": None, "settings": Settings().to_dict(), "figures": False}))
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    for d in (run_dir, ro):
+        d.chmod(0o555)
+    try:
+        code, _, err = run_without_root_bypass(capfd, "calibrate", "--resume", run_dir)
+        # check's --out is checked before anything is read: the missing source is not reached.
+        code2, _, err2 = run_without_root_bypass(capfd, "check", tmp_path / "no_source",
+                                                 "--extrinsic", tmp_path / "none.yaml",
+                                                 "--out", ro / "r.json")
+    finally:
+        for d in (run_dir, ro):
+            d.chmod(0o755)
+    assert code == 2 and err.strip() == (f"paretocal: error: --resume {run_dir}: no permission "
+                                         "to write there"), err
+    assert code2 == 2 and err2.strip() == (f"paretocal: error: --out {ro / 'r.json'}: no "
+                                           "permission to write there"), err2
+    assert sorted(p.name for p in run_dir.iterdir()) == ["run_args.json"] and not any(ro.iterdir())
+
+
+@pytest.mark.parametrize("command", ["check", "perturb"])
+def test_file_out_onto_a_directory(capfd, tmp_path, rig, raw_frames, command):
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    extra = []
+    if command == "check":
+        write_extrinsic(tmp_path / "e.yaml", raw_frames[0].T_ref)
+        extra = ["--extrinsic", tmp_path / "e.yaml"]
+    bad(capfd, command, rig, *extra, "--out", folder,
+        expect=f"--out {folder}: is a directory (give the name of the file to write)")
+    assert not any(folder.iterdir()) and not list(tmp_path.glob(".adir*"))
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--rot", "nan"], "--rot nan: must be a finite number"),
+    (["--rot", "inf"], "--rot inf: must be a finite number"),
+    (["--trans", "nan"], "--trans nan: must be a finite number"),
+    (["--trans", "-inf"], "--trans -inf: must be a finite number"),
+    (["--rot", "-1"], "--rot -1: must not be negative"),
+    (["--rot", "200"], "--rot 200: at most 180 degrees per axis"),
+    (["--trans", "1e308"], "--trans 1e+308: too large (the box +-TRANS must have a finite width)"),
+])
+def test_perturb_bounds(capfd, tmp_path, rig, args, expect):
+    bad(capfd, "perturb", rig, "--out", tmp_path / "p.yaml", *args, expect=expect)
+    assert not (tmp_path / "p.yaml").exists()
+
+
+@pytest.mark.parametrize("kind", ["dangling", "loop"])
+@pytest.mark.parametrize("command", [["calibrate"], ["check"], ["perturb"], ["depth"],
+                                     ["study", "--quick"]])
+def test_out_a_symlink_that_leads_nowhere(capfd, tmp_path, rig, raw_frames, command, kind):
+    link = tmp_path / "out"
+    if kind == "loop":
+        os.symlink(link.name, link)
+        expect = f"--out {link}: symlink loop"
+    else:
+        os.symlink(tmp_path / "gone" / "x", link)
+        expect = f"--out {link}: a symbolic link to {tmp_path / 'gone' / 'x'}, which does not exist"
+    extra = []
+    if command[0] == "check":
+        write_extrinsic(tmp_path / "e.yaml", raw_frames[0].T_ref)
+        extra = ["--extrinsic", tmp_path / "e.yaml"]
+    bad(capfd, command[0], rig, *command[1:], *extra, "--out", link, expect=expect)
+    assert link.is_symlink() and not (tmp_path / "gone").exists()      # left as it was
+
+
+def _alias_bomb(last: str) -> str:
+    """The "billion laughs": nine anchors, each a list of nine aliases of the one before
+    (about 340 bytes, 387 million values expanded), and ``last`` using the top one (&i)."""
+    lines = ['a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for prev, name in zip("abcdefgh", "bcdefghi"):
+        lines.append(f"{name}: &{name} [{', '.join(['*' + prev] * 9)}]")
+    return "\n".join(lines + [last]) + "\n"
+
+
+@pytest.mark.parametrize("where", ["calib.yaml", "--config", "--init"])
+def test_yaml_alias_bomb_is_refused(capfd, tmp_path, rig, where):
+    extra = []
+    if where == "calib.yaml":
+        path = rig / "calib.yaml"
+        path.write_text(_alias_bomb(path.read_text().replace("T_cam_lidar:", "x:")
+                                    + "T_cam_lidar: *i"))
+    else:
+        path = tmp_path / "bomb.yaml"
+        path.write_text(_alias_bomb("T_cam_lidar: *i" if where == "--init"
+                                    else "search: {pop: *i}"))
+        extra = [where, path]
+    assert len(path.read_bytes()) < 2000
+    tracemalloc.start()
+    try:
+        bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *extra, *FAST,
+            expect=f"{path}: its YAML aliases expand it to more than 1,000,000 values")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 100 * 2**20, f"peak {peak / 2**20:.0f} MB"        # nothing was expanded
+
+
+def test_yaml_aliases_that_stay_small_are_read(tmp_path, raw_frames):
+    from paretocal.io import read_extrinsic
+
+    rows = json.dumps(raw_frames[0].T_ref.tolist())
+    path = tmp_path / "init.yaml"
+    path.write_text(f"T: &t {rows}\nT_cam_lidar: *t\ncopies: [*t, *t, *t]\n")
+    np.testing.assert_allclose(read_extrinsic(path), raw_frames[0].T_ref, atol=1e-12)
+    path.write_text("a: &a [1, *a]\nT_cam_lidar: *a\n")
+    with pytest.raises(ParetocalError, match="refers to a structure that contains it"):
+        read_extrinsic(path)
+
+
+# --- symbolic links in the source that lead nowhere -------------------------------------------
+
+@pytest.mark.parametrize("target, what", [
+    ("", "source folder"), ("calib.yaml", "file"), ("images", "image folder"),
+    ("points/{stem}.bin", "point cloud file"), ("images/{stem}.png", "image file")])
+def test_symlink_loops_in_the_source_are_named(capfd, tmp_path, rig, raw_frames, target, what):
+    path = rig / target.format(stem=_stem(raw_frames)) if target else tmp_path / "loop"
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
+    os.symlink(path.name, path)                    # a link to itself
+    bad(capfd, "calibrate", rig if target else path, "--out", tmp_path / "o", *FAST,
+        expect=f"{path}: {what} not reachable: symlink loop")
+
+
+def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames):
+    path = rig / "points" / f"{_stem(raw_frames)}.bin"
+    path.unlink()
+    os.symlink(tmp_path / "moved.bin", path)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(f"{path}: point cloud file not reachable: a symbolic link to "
+                f"{tmp_path / 'moved.bin'}, which does not exist"))

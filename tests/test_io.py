@@ -7,7 +7,7 @@ import pytest
 from paretocal.camera import project
 from paretocal.errors import InputError, SettingsError
 from paretocal.io import detect_source, load_frames, read_extrinsic, select_frames, write_extrinsic
-from paretocal.io.readers import read_points
+from paretocal.io.readers import read_image, read_points
 
 from .helpers import write_generic
 
@@ -108,6 +108,34 @@ class TestGenericFolder:
         (root / "calib.yaml").write_text(yaml.safe_dump(calib))
         with pytest.raises(InputError, match=what):
             load_frames(root)
+
+
+class TestImages:
+    @pytest.mark.parametrize("hot", [True, False])
+    def test_16_bit_image_with_a_hot_pixel_keeps_its_edges(self, tmp_path, raw_frames, hot):
+        """A KITTI frame as a 12-bit camera stores it in a 16-bit PNG (values 0..4080), with
+        one hot pixel at 65535: the scale follows the image, not that pixel."""
+        from paretocal.features.image import edge_map
+        from paretocal.stage import MIN_EDGE_PIXELS
+
+        grey = cv2.cvtColor(raw_frames[0].image, cv2.COLOR_BGR2GRAY)
+        deep = grey.astype(np.uint16) * 16
+        if hot:
+            deep[100, 600] = 65535
+        path = tmp_path / "deep.png"
+        cv2.imwrite(str(path), deep)
+        img = read_image(path)
+        assert img.dtype == np.uint8 and img.shape == (*grey.shape, 3)
+        # The frame's own range maps onto 0..255 (as the 8-bit original has it), not 0..16.
+        assert np.percentile(img, 99) > 0.8 * np.percentile(grey, 99)
+        edges = int(np.count_nonzero(edge_map(img)))
+        expect = int(np.count_nonzero(edge_map(grey)))
+        assert edges > max(MIN_EDGE_PIXELS, expect // 2), (edges, expect)
+
+    def test_flat_16_bit_image_is_black_not_an_error(self, tmp_path):
+        path = tmp_path / "flat.png"
+        cv2.imwrite(str(path), np.full((20, 30), 1000, np.uint16))
+        assert not read_image(path).any()
 
 
 class TestPoints:

@@ -95,8 +95,10 @@ def read_manifest(path: str | Path) -> list[Entry]:
     else:
         import yaml
 
+        from .io.readers import load_yaml
+
         try:
-            doc = yaml.safe_load(text)
+            doc = load_yaml(text, path)              # refuses alias bombs, naming the manifest
         except yaml.YAMLError as exc:
             raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
         rows = doc.get("entries") if isinstance(doc, dict) else doc

@@ -110,33 +110,38 @@ class _Progress:
 
 def _dataset_options(settings, source, take_init_error: bool):
     """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
-    line or the config file already set them."""
+    line or the config file already set them; returns ``(settings, detected source)``, the
+    source to load the frames from (detected once: its warnings are said once)."""
     from .config import SearchSettings
     from .io import detect_source
 
-    opts = detect_source(Path(source), settings.camera).options
+    detected = detect_source(Path(source), settings.camera)
+    opts = detected.options
     s = settings.search
     if (take_init_error and "init_error" in opts
             and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
                                                        SearchSettings.init_error_m)):
         deg, m = opts["init_error"]
         settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
-    return settings
+    return settings, detected
 
 
-def read_init(path: Path, source: Path, camera: int | None):
+def read_init(path: Path, source, camera: int | None):
     """The extrinsic file ``path`` as ``T_cam_lidar``; a KITTI ``calib_velo_to_cam.txt`` is
-    taken through the rectification of ``source`` (which must then be a KITTI source)."""
+    taken through the rectification of ``source`` (a folder, or a source already detected;
+    it must then be a KITTI source)."""
     from .io import detect_source, read_extrinsic
     from .io.exports import kitti_rect_of
     from .io.extrinsic import needs_kitti_rect
 
     rect = None
     if needs_kitti_rect(path):
-        rect = kitti_rect_of(detect_source(source, 2 if camera is None else camera).frames)
+        found = (source if hasattr(source, "frames")
+                 else detect_source(source, 2 if camera is None else camera))
+        rect = kitti_rect_of(found.frames)
         if rect is None:
             raise ParetocalError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
-                                 f"camera 0) but {source} is not a KITTI source; give "
+                                 f"camera 0) but {getattr(source, "root", source)} is not a KITTI source; give "
                                  "T_cam_lidar instead")
     return read_extrinsic(path, kitti_rect=rect)
 
@@ -259,11 +264,11 @@ def calibrate(
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
-    settings = _dataset_options(settings, source, err_deg is None)
+    settings, detected = _dataset_options(settings, source, err_deg is None)
     settings.validate()
     check_output_dir(out)
-    T_init = read_init(init, source, settings.camera) if init is not None else None
-    loaded = load_frames(source, settings.frames, settings.camera)
+    T_init = read_init(init, detected, settings.camera) if init is not None else None
+    loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                      strict)
 
@@ -337,9 +342,11 @@ def verdict_line(reliability: dict) -> str:
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
+    from .io.atomic import check_output_dir
     from .rundir import run_arguments
 
     args = run_arguments(run_dir)              # a one-line error before anything is loaded
+    check_output_dir(run_dir, "--resume")
     _run_calibration(None, args["source"], args["T_init"], args["settings"], run_dir,
                      args["figures"], quiet, max(checkpoint_every, 1), strict, resume=True)
 
@@ -361,9 +368,10 @@ def perturb(
     """
     from .geometry import decalibrate, pose_error
     from .io import detect_source, write_extrinsic
+    from .io.atomic import check_output_file
 
-    if rot < 0 or trans < 0:
-        raise SettingsError("--rot and --trans must not be negative")
+    _check_perturbation(rot, trans)
+    check_output_file(out)
     src = detect_source(source, camera)
     T_ref = src.frames[0].T_ref
     if T_ref is None:
@@ -377,6 +385,24 @@ def perturb(
         f"error vs reference: {e['rotation_deg']:.3f} deg, {e['translation_cm']:.2f} cm"))
     typer.echo(f"paretocal: wrote {out} ({_fmt_err({k: float(v) for k, v in e.items()})} "
                "from the reference)")
+
+
+def _check_perturbation(rot: float, trans: float) -> None:
+    """``perturb``'s bounds: finite and not negative; a rotation within a half turn (a larger
+    per-axis angle only repeats the same rotations) and a translation whose box +-TRANS spans
+    a finite range of floats (the uniform draw needs its width)."""
+    import math
+
+    for name, value in (("--rot", rot), ("--trans", trans)):
+        if not math.isfinite(value):
+            raise SettingsError(f"{name} {value}: must be a finite number")
+        if value < 0:
+            raise SettingsError(f"{name} {value:g}: must not be negative")
+    if rot > 180:
+        raise SettingsError(f"--rot {rot:g}: at most 180 degrees per axis")
+    if not math.isfinite(2.0 * trans):
+        raise SettingsError(f"--trans {trans:g}: too large (the box +-TRANS must have a "
+                            "finite width)")
 
 
 @app.command()
@@ -399,11 +425,13 @@ def check(
     from .check import check_extrinsic
     from .config import load_settings
     from .io import load_frames
-    from .io.atomic import atomic_write_text
+    from .io.atomic import atomic_write_text, check_output_file
 
     _setup_logging(verbose, quiet)
     if rot_tol <= 0 or trans_tol <= 0:
         raise SettingsError("--rot-tol and --trans-tol must be positive")
+    if out is not None:
+        check_output_file(out)
     settings = load_settings(config)
     T = read_init(extrinsic, source, camera)
     loaded = load_frames(source, frames, camera)

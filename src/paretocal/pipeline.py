@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Settings
+from .config import Settings, check_population_memory
 from .decide import decide, reprojection_deviation
 from .errors import InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
@@ -67,6 +67,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     report = _reporter(progress)
     with _timed(timings, "load"):
         frames = _load(source, settings)
+    check_population_memory(settings.search.pop, len(frames))
     T_init, T_ref = resolve_init(frames, T_init)
     with _timed(timings, "lidar_pose"):
         frames, lidar_info, first_rings = locate_lidar(frames, settings)
@@ -80,7 +81,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         # A resumed run decides with the cost model the interrupted run measured.
         stored = checkpoint.stored_cost_model() if checkpoint is not None else None
         stage = Stage(frames, T_init, T_init, settings, report("features"), rings,
-                      CostModel(**dict(stored, probe=dict(
+                      cost=CostModel(**dict(stored, probe=dict(
                           stored["probe"], source=f"checkpoint {checkpoint.path}")))
                       if stored else None)
         warn_unlocated(frames, lidar_info)
@@ -222,7 +223,8 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
         # objective, and that bias grows with the initial error.
         with _timed(timings, "reselect"):
             T_est = stage.objective.transforms(X[np.argmin(F[:, 0])][None])[0]
-            stage = Stage(frames, T_est, T_init, settings, rings=rings, cost=stage.cost)
+            stage = Stage(frames, T_est, T_init, settings, rings=rings, cost=stage.cost,
+                          view="after re-selecting points at the estimate")
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective

@@ -52,7 +52,8 @@ def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings
 
 
 def check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
-                 T_view: np.ndarray | None = None, z_min: float = 0.1) -> None:
+                T_view: np.ndarray | None = None, z_min: float = 0.1,
+                view: str | None = None) -> None:
     """Refuse scenes that cannot constrain the extrinsic, saying which frames and why.
 
     Raises :class:`DegenerateSceneError` when a frame's image has no edges, or when no frame
@@ -60,6 +61,12 @@ def check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
     then says whether the points lie behind the camera, outside the image or are simply too
     few, and whether the inverse or a half-turned extrinsic would see them. Frames with too
     few points among good ones are only reported (a warning): they add little, but no harm.
+
+    ``view`` names the pose ``T_view`` in the messages when it is not the initial extrinsic
+    (the pose the search reached, e.g. "after re-selecting points at the estimate (19.5 deg,
+    31 cm from the initial extrinsic)"). Such a check is a later pass over the same frames:
+    its sparse frames are logged at INFO only, since the frames were reported at the initial
+    extrinsic and the verdict counts the frames that contribute (one warning per problem).
     """
     blank = [f"{f.name} ({len(f.image.edge_uv)} px)" for f in feats
              if len(f.image.edge_uv) < MIN_EDGE_PIXELS]
@@ -74,14 +81,16 @@ def check_scene(feats: list[FrameFeatures], frames: list[Frame] | None = None,
     listed = _names([f"{feats[k].name} ({len(feats[k].xyz)})" for k in few])
     cause = ""
     if frames is not None and T_view is not None:
-        cause = "; " + _view_diagnosis([frames[k] for k in few], T_view, z_min)
+        cause = "; " + _view_diagnosis([frames[k] for k in few], T_view, z_min,
+                                       initial=view is None)
+    where = view or "at the initial extrinsic"
     if len(few) == len(feats):
         raise DegenerateSceneError(
-            f"too few LiDAR feature points in view at the initial extrinsic (fewer than "
+            f"too few LiDAR feature points in view {where} (fewer than "
             f"{MIN_POINTS_PER_FRAME} per frame: {listed}){cause}")
-    log.warning("frame(s) %s: fewer than %d LiDAR feature points in view at the initial "
-                "extrinsic%s; they add little to the calibration", listed, MIN_POINTS_PER_FRAME,
-                cause)
+    log.log(logging.INFO if view else logging.WARNING,
+            "frame(s) %s: fewer than %d LiDAR feature points in view %s%s; they add little to "
+            "the calibration", listed, MIN_POINTS_PER_FRAME, where, cause)
 
 
 def _names(items: list[str], most: int = 5) -> str:
@@ -89,8 +98,12 @@ def _names(items: list[str], most: int = 5) -> str:
     return ", ".join(items[:most]) + more
 
 
-def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float) -> str:
-    """Why few points are in view at ``T``: a short clause for an error message."""
+def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float,
+                    initial: bool = True) -> str:
+    """Why few points are in view at ``T``: a short clause for an error message.
+
+    At the initial extrinsic (``initial``) it also tries the classic mistakes of an --init
+    file; at a pose the search reached, those would blame the wrong thing."""
     from .camera import project
     from .geometry import invert, rotation_zyx
 
@@ -114,6 +127,10 @@ def _view_diagnosis(frames: list[Frame], T: np.ndarray, z_min: float) -> str:
     else:
         why = (f"{seen} of {total} LiDAR points project into the image but few are edges: "
                "the sweep is too sparse there or the feature thresholds too strict")
+    if not initial:
+        return why + ("; the search moved the extrinsic away from where the frames' points "
+                      "are in view: check --init, or narrow the search box (--init-error, "
+                      "--bound-r, --bound-t) to how far off the initial extrinsic may be")
     # Two classic mistakes, cheap to test: the inverse transform and a half turn.
     half = np.eye(4)
     half[:3, :3] = rotation_zyx(0.0, 180.0, 0.0)        # 180 deg about the camera's y axis
@@ -133,9 +150,11 @@ class Stage:
     Parameters: the frames, ``T_view`` (the pose the feature points are chosen at: those in
     view, plus a margin), ``T_init`` (the objective's corrections are relative to it), the
     settings, an optional ``progress(done, total)``, the sweeps' rings (from
-    :func:`paretocal.inputs.sweep_rings`) and an optional cost model whose time line is reused
-    (a checkpoint's, or the first stage's when the points are chosen again); without one the
-    line comes from :func:`cost_model`.
+    :func:`paretocal.inputs.sweep_rings`), an optional cost model whose time line is reused (a
+    checkpoint's, or the first stage's when the points are chosen again; without one the line
+    comes from :func:`cost_model`) and ``view``: what ``T_view`` is, for messages, when it is
+    not the initial extrinsic (the stage and its distance from ``T_init`` are then named, see
+    :func:`check_scene`).
 
     Attributes: ``feats`` (search part of each frame's features), ``scene``, ``holdout``
     (held-out scene or None), ``n_min``, ``n_max``, ``cost`` (the measured cost model) and
@@ -144,9 +163,15 @@ class Stage:
 
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
                  settings: Settings, progress=None, rings: list[Rings] | None = None,
-                 cost: CostModel | None = None):
+                 cost: CostModel | None = None, view: str | None = None):
         feats_all = prepare_features(frames, T_view, settings, progress, rings)
-        check_scene(feats_all, frames, T_view, settings.features.z_min)
+        if view is not None:
+            from .geometry import pose_error
+
+            e = pose_error(T_view, T_init)
+            view += (f" ({float(e['rotation_deg']):.1f} deg, {float(e['translation_cm']):.0f} "
+                     "cm from the initial extrinsic)")
+        check_scene(feats_all, frames, T_view, settings.features.z_min, view)
         o, z_min = settings.objective, settings.features.z_min
         parts = [f.split(o.holdout) for f in feats_all]
         self.feats = [p[0] for p in parts]

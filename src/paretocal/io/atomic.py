@@ -1,33 +1,61 @@
 """Atomic file output: write to a temporary file in the same folder, then rename.
 
 A reader never sees a half-written file, and an interrupted run leaves the previous version.
+A write that fails for a reason the user can fix (a full disk, a quota, a read-only file
+system, no permission) raises :class:`~paretocal.errors.InputError` naming the file.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import InputError, SettingsError
+from .paths import broken_link
+
+#: Reasons a write fails that the user can fix: room on the disk or quota, a writable file
+#: system or folder, a file or link where a folder is expected, a shorter name. Anything else
+#: (an I/O error of the device, a bad descriptor) is left to surface as a bug.
+USER_WRITE_ERRORS = frozenset(getattr(errno, name) for name in (
+    "ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EACCES", "EPERM", "EISDIR", "ENOTDIR", "ELOOP",
+    "ENAMETOOLONG", "EEXIST") if hasattr(errno, name))
+
+
+def write_error(path: Path, exc: OSError) -> InputError:
+    """The one-line error for ``exc``, raised while writing ``path``."""
+    why = os.strerror(exc.errno) if exc.errno else str(exc)
+    return InputError(f"{path}: cannot write ({why})")
+
 
 @contextmanager
 def atomic_path(path: Path):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically."""
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
+
+    An :class:`OSError` of :data:`USER_WRITE_ERRORS` raised here or by the caller's writing
+    becomes an :class:`~paretocal.errors.InputError` naming ``path`` (not the temporary file).
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix,
-                               dir=path.parent)
-    os.close(fd)
-    # mkstemp creates 0600 files; give the result the permissions a plain open() would.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + path.suffix,
+                                   dir=path.parent)
+        os.close(fd)
+        # mkstemp creates 0600 files; give the result the permissions a plain open() would.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         yield Path(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        if exc.errno not in USER_WRITE_ERRORS:
+            raise
+        raise write_error(path, exc) from None
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
 
 
@@ -40,23 +68,53 @@ def atomic_write_text(path: Path, text: str) -> None:
             os.fsync(fh.fileno())
 
 
-def check_output_dir(path: Path, option: str = "--out") -> Path:
-    """Fail before any work when ``path`` cannot become an output folder.
-
-    Raises :class:`~paretocal.errors.SettingsError` naming ``option`` when ``path`` is a file,
-    when a file stands where one of its parent folders should be, or when the nearest existing
-    folder is not writable.
-    """
-    from ..errors import SettingsError
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise SettingsError(f"{option} {path}: exists and is not a folder")
+def _check_parents(path: Path, option: str) -> None:
+    """The nearest existing folder above ``path`` must be a writable folder."""
     for parent in path.parents:
         if parent.exists():
             if not parent.is_dir():
                 raise SettingsError(f"{option} {path}: {parent} is a file, not a folder")
-            if not os.access(parent if not path.exists() else path, os.W_OK | os.X_OK):
+            if not os.access(parent, os.W_OK | os.X_OK):
                 raise SettingsError(f"{option} {path}: no permission to write there")
-            break
+            return
+
+
+def check_output_dir(path: Path, option: str = "--out") -> Path:
+    """Fail before any work when ``path`` cannot become an output folder.
+
+    Raises :class:`~paretocal.errors.SettingsError` naming ``option`` when ``path`` is a file,
+    a symbolic link that leads nowhere (a loop, a missing target), when a file stands where
+    one of its parent folders should be, or when ``path`` (or the nearest existing folder
+    above it) is not writable.
+    """
+    path = Path(path)
+    link = broken_link(path)
+    if link:
+        raise SettingsError(f"{option} {path}: {link}")
+    if path.exists():
+        if not path.is_dir():
+            raise SettingsError(f"{option} {path}: exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise SettingsError(f"{option} {path}: no permission to write there")
+        return path
+    _check_parents(path, option)
+    return path
+
+
+def check_output_file(path: Path, option: str = "--out") -> Path:
+    """Fail before any work when the file ``path`` cannot be written.
+
+    Raises :class:`~paretocal.errors.SettingsError` naming ``option`` when ``path`` is a
+    folder, a symbolic link that leads nowhere (a loop, a missing target: writing would
+    replace the link, not create its target), or when the folder it goes into (or the nearest
+    existing one above it) is a file or not writable. An existing file is replaced.
+    """
+    path = Path(path)
+    link = broken_link(path)
+    if link:
+        raise SettingsError(f"{option} {path}: {link}")
+    if path.is_dir():
+        raise SettingsError(f"{option} {path}: is a directory (give the name of the file "
+                            "to write)")
+    _check_parents(path, option)
     return path

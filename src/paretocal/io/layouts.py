@@ -18,6 +18,7 @@ from ..camera import Camera
 from ..errors import InputError, SettingsError
 from ..geometry import check_rigid
 from .frame import Frame
+from .paths import missing, not_found
 from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
                       read_cloud, read_image, read_kitti_calib, read_mapping)
 
@@ -78,21 +79,39 @@ def _pair(root: Path, image_dir: Path, points_dir: Path,
     """Pair images and point clouds by stem; fail if the folders share no stem."""
     image_dir, points_dir = _link_file(image_dir), _link_file(points_dir)
     if not image_dir.is_dir():
-        raise InputError(f"{image_dir}: image folder not found")
+        raise InputError(not_found(image_dir, "image folder"))
     if not points_dir.is_dir():
-        raise InputError(f"{points_dir}: point cloud folder not found")
-    images = {p.stem: p for p in _listdir(image_dir) if p.suffix.lower() in image_suffixes}
-    points = {p.stem: p for p in _listdir(points_dir) if p.suffix.lower() in point_suffixes}
+        raise InputError(not_found(points_dir, "point cloud folder"))
+    images = _by_stem(_listdir(image_dir), image_suffixes)
+    points = _by_stem(_listdir(points_dir), point_suffixes)
     common = sorted(set(images) & set(points))
     if not common:
         raise InputError(f"{root}: no frame pairs: {len(images)} images in {image_dir} and "
                          f"{len(points)} point clouds in {points_dir} share no file stem")
+    # Which of two files of one frame is meant cannot be guessed.
+    for what, found in (("images", images), ("point clouds", points)):
+        twice = [s for s in common if len(found[s]) > 1]
+        if twice:
+            files = " and ".join(str(p) for p in found[twice[0]])
+            more = f" (and {len(twice) - 1} more frames like it)" if len(twice) > 1 else ""
+            raise InputError(f"{files}: {len(found[twice[0]])} {what} for frame {twice[0]}"
+                             f"{more}; a frame has one image and one point cloud: remove or "
+                             "rename the others")
     for what, lone, folder in (("images", sorted(set(images) - set(points)), points_dir),
                                ("point clouds", sorted(set(points) - set(images)), image_dir)):
         if lone:
             log.warning("%s: %d %s without a partner in %s, skipped (%s%s)", root, len(lone),
                         what, folder, ", ".join(lone[:5]), ", ..." if len(lone) > 5 else "")
-    return [(s, images[s], points[s]) for s in common]
+    return [(s, images[s][0], points[s][0]) for s in common]
+
+
+def _by_stem(paths: list[Path], suffixes) -> dict[str, list[Path]]:
+    """The files with one of ``suffixes`` (any case), grouped by stem."""
+    out: dict[str, list[Path]] = {}
+    for p in paths:
+        if p.suffix.lower() in suffixes:
+            out.setdefault(p.stem, []).append(p)
+    return out
 
 
 def _listdir(folder: Path) -> list[Path]:
@@ -371,7 +390,7 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
                              "file (relative to the folder)")
         ipath = root / ref
         if not ipath.is_file():
-            raise InputError(f"{cpath}: camera_info file {ipath} not found")
+            raise InputError(f"{cpath}: camera_info file {ipath} {missing(ipath)}")
         info = read_mapping(ipath)
         return (_camera_info_message(ipath, info) if _is_message(info)
                 else _camera_info(ipath, info))
@@ -408,7 +427,7 @@ def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndar
                          "folder), nonzero on usable pixels")
     mpath = root / ref
     if not mpath.is_file():
-        raise InputError(f"{cpath}: {key} file {mpath} not found")
+        raise InputError(f"{cpath}: {key} file {mpath} {missing(mpath)}")
     img = decode_image(mpath)
     if img.shape[:2] != (camera.height, camera.width):
         raise InputError(f"{mpath}: mask is {img.shape[1]}x{img.shape[0]} but the calibration "
@@ -475,13 +494,13 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
     """Detect the layout of ``source`` and list its frames (nothing heavy is read yet)."""
     root = Path(source)
     if not root.exists():
-        raise InputError(f"{root}: source folder not found")
+        raise InputError(not_found(root, "source folder"))
     if not root.is_dir():
         raise InputError(f"{root}: source must be a folder")
     if not 0 <= camera_index <= 3:
         raise SettingsError(f"--camera {camera_index}: must be 0, 1, 2 or 3")
-    if (root / "calib.yaml").is_file():
-        return _folder(root)
+    if (root / "calib.yaml").is_file() or (root / "calib.yaml").is_symlink():
+        return _folder(root)      # a broken link there is the folder's calib.yaml, unreadable
     if (root / "training").is_dir() and not (root / "velodyne").is_dir():
         root = root / "training"
     if (root / "velodyne").is_dir() and (root / "calib").is_dir():
@@ -566,14 +585,16 @@ def read_frame(files: FrameFiles) -> Frame:
                  sensor_pose=files.sensor_pose)
 
 
-def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) -> list[Frame]:
+def load_frames(source: str | Path | Source, frames: str | None = None,
+                camera: int = 2) -> list[Frame]:
     """Detect the layout of ``source`` and read the selected frames.
 
     Parameters
     ----------
-    source : path
+    source : path or Source
         A KITTI raw drive (or date) folder, a KITTI object ``training`` folder, or a generic
-        folder with ``calib.yaml`` (docs/conventions.md section 2).
+        folder with ``calib.yaml`` (docs/conventions.md section 2); or a source already
+        detected (:func:`detect_source`, whose warnings are then not said again).
     frames : str, optional
         Selection spec (``0:10``, ``0,3,7``, stems); all frames by default.
     camera : int
@@ -583,7 +604,7 @@ def load_frames(source: str | Path, frames: str | None = None, camera: int = 2) 
     -------
     list of Frame
     """
-    src = detect_source(Path(source), camera)
+    src = source if isinstance(source, Source) else detect_source(Path(source), camera)
     idx = select_frames([f.name for f in src.frames], frames)
     out = [read_frame(src.frames[i]) for i in idx]
     # The readers note what they could not find (no intensity field, an odd time unit) per

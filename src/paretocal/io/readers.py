@@ -54,6 +54,7 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from .paths import not_found
 
 log = logging.getLogger(__name__)
 
@@ -815,7 +816,7 @@ def _require_file(path: Path, what: str) -> None:
         raise InputError(f"{path}: {what} expected, but this is a folder")
     if path.exists():
         raise InputError(f"{path}: {what} expected, but this is not a regular file")
-    raise InputError(f"{path}: {what} not found")
+    raise InputError(not_found(path, what))
 
 
 @contextlib.contextmanager
@@ -883,12 +884,37 @@ def decode_image(path: Path) -> np.ndarray:
     return img
 
 
+#: Share of the pixels (per tail) that 16-bit and float images may hold beyond their black and
+#: white points: a hot or dead pixel, or a cluster of up to 0.1 % of the frame (466 pixels of a
+#: 1242x375 image), does not set the scale; clipping so few to black or white loses no edge that
+#: matters.
+STRETCH_CLIP = 0.001
+
+
+def _to_8bit(img: np.ndarray) -> np.ndarray:
+    """A 16-bit or float image as uint8 for edge detection, its 0.1th to 99.9th percentile
+    (:data:`STRETCH_CLIP`, over the finite values of every channel) stretched to 0..255.
+
+    The extremes would let one hot pixel decide: a 12-bit frame stored in 16 bits with one
+    pixel at 65535 turns black (every other value below 16 of 255) and shows no edges.
+    """
+    values = img[np.isfinite(img)] if img.dtype.kind == "f" else img.ravel()
+    if values.size == 0:
+        return np.zeros(img.shape, np.uint8)
+    lo, hi = np.percentile(values, [100 * STRETCH_CLIP, 100 * (1 - STRETCH_CLIP)])
+    if not hi > lo:
+        lo, hi = float(values.min()), float(values.max())
+    if not hi > lo:
+        return np.zeros(img.shape, np.uint8)
+    scaled = (np.nan_to_num(img.astype(np.float32), nan=lo) - lo) * (255.0 / (hi - lo))
+    return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
+
+
 def read_image(path: Path) -> np.ndarray:
     """Read an image as (H, W, 3) uint8 BGR; grey images are expanded to three channels."""
     img = decode_image(Path(path))
     if img.dtype != np.uint8:
-        # 16-bit and float images: keep the relative contrast for edge detection.
-        img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        img = _to_8bit(img)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     elif img.shape[2] == 4:
@@ -939,6 +965,65 @@ def calib_matrix(calib: dict[str, np.ndarray], key: str, shape: tuple[int, int],
     return m
 
 
+#: Most values (scalars, lists and mappings) a YAML file may hold once its aliases are expanded.
+#: A value costs at most about 100 bytes as a Python object (8 as a number in numpy), so one
+#: file can make the readers build at most about 100 MB; the files paretocal reads (calib.yaml,
+#: camera_info, --config, --init) hold a few hundred values. Aliases themselves are allowed:
+#: only their expansion is bounded ("billion laughs": nine nested anchors of nine aliases each
+#: are 340 bytes of text and 387 million values, which numpy turns into 2.9 GB).
+MAX_YAML_VALUES = 1_000_000
+
+
+class _AliasBomb(Exception):
+    """A YAML document whose aliases expand beyond :data:`MAX_YAML_VALUES`, or refer to
+    themselves."""
+
+
+def _expanded_size(node, sizes: dict, open_: set) -> int:
+    """Values in ``node`` with every alias expanded (memoised per node, so linear in the
+    document's own nodes however often they are referred to)."""
+    key = id(node)
+    if key in sizes:
+        return sizes[key]
+    if key in open_:
+        raise _AliasBomb("a YAML alias refers to a structure that contains it (a recursive "
+                         "document); write the values out instead")
+    open_.add(key)
+    n = 1
+    if isinstance(node, yaml.SequenceNode):
+        n += sum(_expanded_size(v, sizes, open_) for v in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        n += sum(_expanded_size(k, sizes, open_) + _expanded_size(v, sizes, open_)
+                 for k, v in node.value)
+    open_.discard(key)
+    sizes[key] = n
+    if n > MAX_YAML_VALUES:
+        raise _AliasBomb(f"its YAML aliases expand it to more than {MAX_YAML_VALUES:,} values "
+                         "(an alias bomb?); write the values out instead of repeating anchors")
+    return n
+
+
+def load_yaml(text: str, path: Path | str):
+    """``yaml.safe_load`` of ``text`` that refuses alias bombs quickly, naming ``path``.
+
+    A document whose anchors and aliases expand beyond :data:`MAX_YAML_VALUES` values (or
+    refer to themselves) raises :class:`InputError` before anything is built from it; YAML
+    syntax errors propagate as :class:`yaml.YAMLError` for the caller to word.
+    """
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        try:
+            _expanded_size(node, {}, set())
+        except _AliasBomb as exc:
+            raise InputError(f"{path}: {exc}") from None
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
 def read_mapping(path: Path) -> dict:
     """Read a YAML or JSON file whose top level is a mapping."""
     path = Path(path)
@@ -951,7 +1036,7 @@ def read_mapping(path: Path) -> dict:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
     try:
-        data = json.loads(text) if kind == "JSON" else yaml.safe_load(text)
+        data = json.loads(text) if kind == "JSON" else load_yaml(text, path)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
