@@ -140,8 +140,9 @@ def read_init(path: Path, source, camera: int | None):
                  else detect_source(source, 2 if camera is None else camera))
         rect = kitti_rect_of(found.frames)
         if rect is None:
+            where = getattr(source, "root", source)
             raise ParetocalError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
-                                 f"camera 0) but {getattr(source, "root", source)} is not a KITTI source; give "
+                                 f"camera 0) but {where} is not a KITTI source; give "
                                  "T_cam_lidar instead")
     return read_extrinsic(path, kitti_rect=rect)
 
