@@ -794,6 +794,7 @@ def test_disk_full_names_the_file_being_written(capfd, tmp_path, rig, monkeypatc
     line = bad(capfd, "calibrate", rig, "--out", out, *FAST, "-q",
                expect=(str(out), ": cannot write (No space left on device)"))
     assert "result.json" in line and not (out / "result.json").exists()
+    assert not (out / ".staging").exists()              # no half-written run is left behind
     init = tmp_path / "init.yaml"
     bad(capfd, "perturb", rig, "--out", init,
         expect=f"{init}: cannot write (No space left on device)")

@@ -315,3 +315,19 @@ def test_manifest_accepts_numbers_where_numbers_are_meant(tmp_path):
     csv_path.write_bytes(b"\xef\xbb\xbfid,source,camera\nd1,x,3\n")    # a spreadsheet's BOM
     (e,) = read_manifest(csv_path)
     assert (e.id, e.camera) == ("d1", 3)
+
+
+def test_batch_without_the_fleet_extra_says_how_to_install_it(tmp_path, capsys, monkeypatch):
+    import importlib.util
+
+    from paretocal.cli import main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "distributed" else real(name, *a))
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text("entries: []\n")
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["paretocal: error: paretocal batch needs distributed: install the fleet "
+                   "extra, pip install 'paretocal[fleet]'"]

@@ -413,6 +413,17 @@ def write_summary(rows: list[dict], out_dir: Path) -> list[Path]:
     return [out_dir / "summary.csv", out_dir / "summary.parquet"]
 
 
+def require_fleet() -> None:
+    """Raise :class:`ParetocalError` saying how to install the ``fleet`` extra (Dask and
+    pyarrow, which only ``batch`` needs) when it is missing."""
+    import importlib.util
+
+    missing = [m for m in ("distributed", "pyarrow") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise ParetocalError(f"paretocal batch needs {' and '.join(missing)}: install the fleet "
+                             "extra, pip install 'paretocal[fleet]'")
+
+
 def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
               scheduler: str | None = None, workers: int | None = None, check: bool = True,
               figures: bool = False, progress=None) -> dict:
@@ -456,6 +467,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     """
     from .config import Settings
 
+    require_fleet()
     t0 = time.perf_counter()
     entries = read_manifest(manifest)
     settings = (settings or Settings()).validate()

@@ -93,7 +93,12 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
     docstring); returns the published paths."""
     staging = out / STAGING
     shutil.rmtree(staging, ignore_errors=True)
-    written = write_run(result, staging, frames, figures=figures)
+    try:
+        written = write_run(result, staging, frames, figures=figures)
+    except BaseException:
+        # A failed or interrupted write (a full disk, Ctrl-C) leaves no half run behind.
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
     names = [p.relative_to(staging).as_posix() for p in written]
     # The marker goes first, then everything the previous run published or left behind.
     (out / RESULT).unlink(missing_ok=True)
@@ -172,7 +177,6 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
             try:
                 publish_run(result, out, result.sweeps or frames, figures=figures)
             except KeyboardInterrupt:
-                shutil.rmtree(out / STAGING, ignore_errors=True)
                 raise Interrupted("writing the results", result.history[-1]["gen"],
                                   result.nsga_front[0], result.nsga_front[1]) from None
         except Interrupted as exc:
