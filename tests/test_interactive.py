@@ -163,9 +163,9 @@ class TestPage:
 
 def _require_browser():
     """playwright's ``sync_playwright`` and a chromium binary. Missing either, the test skips with
-    a reason saying how to enable it; with PARETOCAL_REQUIRE_BROWSER=1 (set by .ci/run) it fails
+    a reason saying how to enable it; with PARETOCAL_REQUIRE_OPTIONAL=1 (set by .ci/run) it fails
     instead, so CI always runs it."""
-    required = os.environ.get("PARETOCAL_REQUIRE_BROWSER") == "1"
+    required = os.environ.get("PARETOCAL_REQUIRE_OPTIONAL") == "1"
     missing = pytest.fail if required else pytest.skip
     try:
         from playwright.sync_api import sync_playwright

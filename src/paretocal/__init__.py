@@ -15,8 +15,9 @@ Quick use::
 
 The other commands have their functions too: :func:`check_extrinsic` (``paretocal check``),
 :func:`run_study` (``paretocal study``), :func:`write_depth` / :func:`depth_map`
-(``paretocal depth``). Every array is numpy; transforms are 4x4 ``T_cam_lidar`` (LiDAR ->
-camera, metres); angles in files and results are degrees.
+(``paretocal depth``), :func:`extract_bag` (``paretocal extract``). Every array is numpy;
+transforms are 4x4 ``T_cam_lidar`` (LiDAR -> camera, metres); angles in files and results are
+degrees.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -30,6 +31,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 #: ``import paretocal.cli`` stays light: the command line answers --help and interrupts at once.
 _LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "config",
          "depth_map": "depth", "write_depth": "depth", "ParetocalError": "errors",
+         "extract_bag": "extract",
          "load_frames": "io", "read_extrinsic": "io", "write_extrinsic": "io",
          "write_run": "report.results", "CalibrationResult": "pipeline",
          "calibrate": "pipeline", "calibrate_run": "rundir", "resume_run": "rundir",
@@ -51,5 +53,6 @@ def __dir__():
 
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
-           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "load_frames", "load_settings",
+           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "extract_bag", "load_frames",
+           "load_settings",
            "read_extrinsic", "resume_run", "run_study", "write_depth", "write_extrinsic", "write_run"]

@@ -17,6 +17,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import InputError, SettingsError
 from ..geometry import check_rigid
+from .bags import extract_hint, is_bag
 from .frame import Frame
 from .paths import missing, not_found
 from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
@@ -409,6 +410,27 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
                        cam.get("model"), cam.get("xi"))
 
 
+def calib_camera(data: dict, where: str | Path, root: Path | None = None) -> Camera:
+    """The camera of a ``calib.yaml`` mapping, validated as the generic folder's loader does.
+
+    Parameters
+    ----------
+    data : dict
+        The mapping: a ``camera`` section (``K``, ``width``, ``height``, optional ``model``,
+        ``D``, ``xi``, or the ROS camera_info form) or a ``camera_info`` file name.
+    where : str or path
+        What the mapping is called in error messages (a file, or e.g. a bag's topic).
+    root : path, optional
+        The folder a ``camera_info`` file name is relative to.
+
+    Raises
+    ------
+    InputError
+        Naming ``where`` and the key at fault.
+    """
+    return _folder_camera(Path(root) if root is not None else Path("."), where, data)
+
+
 def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndarray | None:
     """The usable pixels named by ``camera.mask`` (or a top-level ``mask``) in calib.yaml.
 
@@ -495,6 +517,9 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
     root = Path(source)
     if not root.exists():
         raise InputError(not_found(root, "source folder"))
+    if is_bag(root) and not (root / "calib.yaml").is_file():
+        raise InputError(f"{root}: a ROS bag; extract its frames to a folder first ("
+                         f"{extract_hint(root)}) and pass that folder")
     if not root.is_dir():
         raise InputError(f"{root}: source must be a folder")
     if not 0 <= camera_index <= 3:
