@@ -55,7 +55,7 @@ def test_rig_layout(tmp_path):
     frames = load_rig_frames(cams, "0:2")
     assert frames["front"][1].points is frames["left"][1].points
     # A single-camera command on a rig says what to do.
-    with pytest.raises(InputError, match="cameras"):
+    with pytest.raises(InputError, match="only 'paretocal calibrate' takes a rig folder"):
         detect_source(rig)
 
 
@@ -93,7 +93,22 @@ def _top_level_camera(d):
     d["camera"] = d["cameras"][0]["camera"]
 
 
+def _not_a_list(d):
+    d["cameras"] = "front"
+
+
+def _empty(d):
+    d["cameras"] = []
+
+
+def _slash(d):
+    d["cameras"][0]["name"] = "a/b"
+
+
 @pytest.mark.parametrize("edit, words", [
+    (_not_a_list, ["cameras must be a list of cameras"]),
+    (_empty, ["cameras lists no camera"]),
+    (_slash, ["cameras[0].name 'a/b'"]),
     (_dup, ["cameras", "'front' is given twice"]),
     (_no_images, ["cameras.left.images", "nowhere"]),
     (_no_T, ["cameras.front.T_cam_lidar is missing"]),
@@ -115,9 +130,12 @@ def test_bad_rig_calib_exits_2(tmp_path, capsys, edit, words):
 @pytest.mark.parametrize("args, words", [
     (["--camera", "right"], ["--camera right", "front, left"]),
     (["--init", "x.yaml"], ["--init x.yaml", "--camera NAME"]),
+    (["single"], ["--camera front: a KITTI camera index", "rig folder"]),
 ])
 def test_bad_rig_options_exit_2(tmp_path, capsys, args, words):
     rig = make_rig(tmp_path)
+    if "single" in args:
+        args, rig = ["--camera", "front"], DATA / "front_pinhole"
     status = main(["calibrate", str(rig), "--out", str(tmp_path / "out"), *args])
     err = capsys.readouterr().err
     assert status == 2, err

@@ -444,9 +444,10 @@ def _folder(root: Path) -> Source:
     data = read_mapping(cpath)
     if data.get("cameras") is not None:
         names = ", ".join(name for name, _ in _rig_entries(cpath, data))
-        raise InputError(f"{cpath}: 'cameras' lists the cameras of a rig ({names}); calibrate "
-                         "them all with 'paretocal calibrate' on the folder, or one with "
-                         "--camera NAME (in Python: paretocal.io.rig_cameras)")
+        raise InputError(f"{cpath}: 'cameras' lists the cameras of a rig ({names}): only "
+                         "'paretocal calibrate' takes a rig folder (all its cameras, or one "
+                         "with --camera NAME); give other commands a single-camera folder (in "
+                         "Python: paretocal.io.rig_cameras)")
     camera = _folder_camera(root, cpath, data)
     mask = _folder_mask(root, cpath, data, camera)
     T_ref = None
