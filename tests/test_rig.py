@@ -197,3 +197,22 @@ def test_two_camera_run(tmp_path, capsys):
     ov = pair["overlap"]
     assert 0 <= ov["points_in_both"] <= min(ov["points_in_view_a"], ov["points_in_view_b"])
     assert pair["consistency"]["verdict"] in ("consistent", "inconsistent", "not checked")
+
+
+def test_one_camera_of_the_rig_from_the_command_line(tmp_path, capsys):
+    """``--camera NAME`` calibrates that camera into OUT/NAME/ (no rig.json), from --init."""
+    rig = make_rig(tmp_path)
+    config = tmp_path / "fast.yaml"
+    # Fast: no de-skew and rings by elevation (no sensor pose to estimate).
+    config.write_text("decision: {restarts: 0}\nmotion: {deskew: \"off\"}\n"
+                      "features: {ring_method: elevation}\n")
+    out = tmp_path / "out"
+    status = main(["calibrate", str(rig), "--out", str(out), "--camera", "left", "--init",
+                   str(DATA / "left_fisheye" / "calib.yaml"), "--frames", "0:2", "--pop", "12",
+                   "--gens", "2", "--no-polish", "--no-figures", "--config", str(config)])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert "camera left: 2 frames" in captured.out
+    assert "error vs reference: n/a" not in captured.out
+    assert (out / "left" / "result.json").is_file()
+    assert not (out / "front").exists() and not (out / "rig.json").exists()
