@@ -216,3 +216,23 @@ def test_one_camera_of_the_rig_from_the_command_line(tmp_path, capsys):
     assert "error vs reference: n/a" not in captured.out
     assert (out / "left" / "result.json").is_file()
     assert not (out / "front").exists() and not (out / "rig.json").exists()
+
+
+def test_a_camera_that_fails_is_named(tmp_path, capsys):
+    """A camera whose images hold no edges stops the rig with exit 2 naming the camera."""
+    import cv2
+
+    def black_left(d):
+        d["cameras"] = d["cameras"][::-1]
+        d["cameras"][0]["images"] = "black"
+    rig = make_rig(tmp_path, black_left)
+    (rig / "black").mkdir()
+    for f in sorted((DATA / "left_fisheye" / "images").iterdir())[:2]:
+        cv2.imwrite(str(rig / "black" / f.name), np.zeros((704, 1280, 3), np.uint8))
+    config = tmp_path / "fast.yaml"
+    config.write_text("motion: {deskew: \"off\"}\nfeatures: {ring_method: elevation}\n")
+    status = main(["calibrate", str(rig), "--out", str(tmp_path / "out"), "--frames", "0:2",
+                   "--no-figures", "--config", str(config)])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "paretocal: error: camera left: " in err and not (tmp_path / "out" / "front").exists()

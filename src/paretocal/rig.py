@@ -37,7 +37,7 @@ import numpy as np
 
 from .camera import project
 from .config import Settings
-from .errors import Interrupted, SettingsError
+from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
 from .inputs import prepare_lidar
 from .io import load_rig_frames, rig_cameras
@@ -109,6 +109,9 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         except Interrupted as exc:
             exc.run_dir = out / name       # the run folder to resume
             raise
+        except ParetocalError as exc:
+            # The cameras done so far keep their run folders; say which camera failed.
+            raise type(exc)(f"camera {name}: {exc}") from None
         if on_camera is not None:
             on_camera(name, results[name])
     summary = rig_summary(results, settings.features.z_min)
