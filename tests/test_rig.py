@@ -11,7 +11,7 @@ import yaml
 
 from paretocal.cli import main
 from paretocal.config import Settings
-from paretocal.errors import InputError
+from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import invert, pose_error
 from paretocal.io import detect_source, is_rig, load_rig_frames, rig_cameras
 
@@ -182,6 +182,8 @@ def test_two_camera_run(tmp_path, capsys):
     for name in ("front", "left"):
         assert (out / name / "result.json").is_file()
         assert run_arguments(out / name)["rig_camera"] == name
+    with pytest.raises(ParetocalError, match="resume one camera with --resume"):
+        run_arguments(out)
     on_disk = json.loads((out / RIG_JSON).read_text())
     assert [c["name"] for c in on_disk["cameras"]] == ["front", "left"]
     T = {n: np.asarray(json.loads((out / n / "result.json").read_text())["T_cam_lidar"])
@@ -236,3 +238,29 @@ def test_a_camera_that_fails_is_named(tmp_path, capsys):
     err = capsys.readouterr().err
     assert status == 2, err
     assert "paretocal: error: camera left: " in err and not (tmp_path / "out" / "front").exists()
+
+
+def test_resume_loads_the_recorded_camera(tmp_path, monkeypatch):
+    """A rig camera's run folder records the camera; a resume loads that camera's frames
+    (the calibration itself is stubbed out here)."""
+    import paretocal.rundir as rundir
+
+    rig = make_rig(tmp_path)
+    run = tmp_path / "out" / "left"
+    run.mkdir(parents=True)
+    (run / rundir.RUN_ARGS).write_text(json.dumps({
+        "source": str(rig), "T_init": None, "settings": Settings(frames="0:2").to_dict(),
+        "figures": False, "rig_camera": "left"}))
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def stub(frames, *args, **kwargs):
+        seen["models"] = {f.camera.model for f in frames}
+        seen["images"] = {f.image_path.parent.name for f in frames}
+        raise Stop
+    monkeypatch.setattr(rundir, "calibrate", stub)
+    with pytest.raises(Stop):
+        rundir.resume_run(run)
+    assert seen == {"models": {"mei"}, "images": {"left_images"}}

@@ -211,6 +211,12 @@ def run_arguments(run_dir: str | Path) -> dict:
     folder or the file is damaged."""
     path = Path(run_dir) / RUN_ARGS
     if not path.is_file():
+        cameras = (sorted(p.parent.name for p in Path(run_dir).glob(f"*/{RUN_ARGS}"))
+                   if Path(run_dir).is_dir() else [])
+        if cameras:
+            raise ParetocalError(f"{run_dir}: the run folder of a rig (cameras "
+                                 f"{', '.join(cameras)}); resume one camera with --resume "
+                                 f"{Path(run_dir) / cameras[0]}")
         raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
                              "calibrate (or it was run with --checkpoint-every 0)")
     try:
