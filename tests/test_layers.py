@@ -18,7 +18,7 @@ RANKS = {
     "inputs": 7, "stage": 7, "verdict": 7, "result": 7,
     "pipeline": 8, "check": 8, "depth": 8, "extract": 8,
     "report": 9,
-    "study": 10, "batch": 10, "rundir": 10,
+    "study": 10, "batch": 10, "rundir": 10, "rig": 10,
     "cli": 11, "__init__": 11,
     "__main__": 12,
 }

@@ -29,6 +29,9 @@ Seed = Annotated[Optional[int], typer.Option("--seed", help="Random seed (defaul
 CameraOrConfig = Annotated[Optional[int], typer.Option(
     "--camera", help="KITTI camera index 0-3 (default 2).")]
 Camera = Annotated[int, typer.Option("--camera", help="KITTI camera index 0-3.")]
+CameraOrName = Annotated[Optional[str], typer.Option(
+    "--camera", help="KITTI camera index 0-3 (default 2), or the name of one camera of a rig "
+                     "folder (calib.yaml with cameras:).")]
 
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -190,7 +193,7 @@ def calibrate(
     seed: Seed = None,
     pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
     gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
-    camera: CameraOrConfig = None,
+    camera: CameraOrName = None,
     config: ConfigFile = None,
     budget_ms: Annotated[Optional[float], typer.Option(
         "--budget-ms", help="Choose the best Chamfer whose modelled evaluation time is within "
@@ -262,6 +265,13 @@ def calibrate(
         decision={"rule": rule.value if rule else None, "budget_ms": budget_ms,
                   "refine": polish, "max_deviation_px": max_deviation})
     import dataclasses
+
+    from .io import is_rig
+    if is_rig(source):
+        return _calibrate_rig(source, out, init, camera, frames, settings, err_deg is None,
+                              figures, quiet, checkpoint_every, strict)
+    if camera is not None:
+        camera = _camera_index(camera)
     if camera is not None or frames is not None:
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
@@ -273,6 +283,77 @@ def calibrate(
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                      strict)
+
+
+def _camera_index(text: str) -> int:
+    """``--camera`` of a single-camera source: a KITTI camera index."""
+    try:
+        return int(text)
+    except ValueError:
+        raise SettingsError(f"--camera {text}: a KITTI camera index 0-3; camera names apply "
+                            "to a rig folder (calib.yaml with cameras:)") from None
+
+
+def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,
+                   take_init_error: bool, figures: bool, quiet: bool, checkpoint_every: int,
+                   strict: bool) -> None:
+    """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
+    and ``out/rig.json`` (:mod:`paretocal.rig`)."""
+    import dataclasses
+
+    from .config import SearchSettings
+    from .errors import Interrupted
+    from .io import rig_cameras
+    from .io.atomic import check_output_dir
+    from .rig import RIG_JSON, calibrate_rig, pair_line
+
+    cams = rig_cameras(source)
+    names = [n for n, _ in cams]
+    if camera is not None and camera not in names:
+        raise SettingsError(f"--camera {camera}: {source / 'calib.yaml'} lists the cameras "
+                            f"{', '.join(names)}")
+    if init is not None and camera is None:
+        raise SettingsError(f"--init {init}: a rig's initial extrinsics are its calib.yaml's "
+                            "cameras.NAME.T_cam_lidar; --init applies to one camera, with "
+                            "--camera NAME")
+    if frames is not None:
+        settings = dataclasses.replace(settings, frames=frames)
+    opts = cams[0][1].options
+    s = settings.search
+    if (take_init_error and "init_error" in opts
+            and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
+                                                       SearchSettings.init_error_m)):
+        deg, m = opts["init_error"]
+        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    settings.validate()
+    check_output_dir(out)
+    T_inits = {camera: read_init(init, source, None)} if init is not None else None
+    interactive = sys.stderr.isatty() and not quiet
+    unreliable = []
+
+    def said(name, result):
+        ref = result.reference_error
+        rel = result.reliability
+        typer.echo(f"paretocal: camera {name}: {len(result.frames)} frames, chosen n = "
+                   f"{result.n_points}; error vs reference: {_fmt_err(ref)}; verdict "
+                   f"{rel['verdict']}; wrote {out / name}")
+        if rel["verdict"] != "ok":
+            unreliable.append(name)
+
+    try:
+        with _Progress(interactive) as progress:
+            summary = calibrate_rig(source, out, settings, T_inits,
+                                    [camera] if camera is not None else None, figures,
+                                    checkpoint_every, progress, on_camera=said)
+    except Interrupted as exc:
+        _report(interrupted_line(exc, getattr(exc, "run_dir", out)))
+        raise typer.Exit(130) from None
+    for pair in summary["pairs"]:
+        typer.echo(f"paretocal: {pair_line(pair)}")
+    if summary["pairs"]:
+        typer.echo(f"paretocal: wrote {out / RIG_JSON}")
+    if strict and unreliable:
+        raise typer.Exit(STRICT_EXIT)
 
 
 def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,

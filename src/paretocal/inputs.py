@@ -4,6 +4,7 @@ offered (result.json ``inputs``)."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -242,3 +243,43 @@ def describe_inputs(frames: list[Frame], lidar_info: dict | None = None,
         out["rings"] = [{"frame": f.name, "method": r.method, "n_rings": int(r.n_rings),
                          "purity": round(float(r.purity), 4)} for f, r in zip(frames, rings)]
     return out
+
+
+@dataclasses.dataclass
+class LidarSteps:
+    """The LiDAR-only steps of a calibration, done once for several cameras of one rig:
+    the sweeps located (``sensor_pose``), their rings recovered, and de-skewed (``frames``,
+    whose images and cameras are those of the camera they were computed with)."""
+
+    frames: list[Frame]
+    lidar_info: dict
+    rings: list
+    motion_info: dict
+    settings_key: dict
+
+    def for_camera(self, frames: list[Frame]) -> list[Frame]:
+        """``frames`` (another camera's, over the same clouds in the same order) with these
+        steps' points and sensor pose: the image, camera, reference and mask stay theirs."""
+        if [(f.name, f.points_path) for f in frames] != [(f.name, f.points_path)
+                                                          for f in self.frames]:
+            raise ValueError("LidarSteps.for_camera: the frames are not over the same clouds")
+        return [dataclasses.replace(done, image=f.image, camera=f.camera, T_ref=f.T_ref,
+                                    image_path=f.image_path, mask=f.mask,
+                                    kitti_rect=f.kitti_rect)
+                for done, f in zip(self.frames, frames)]
+
+
+def lidar_settings_key(settings: Settings) -> dict:
+    """The settings the LiDAR-only steps depend on (features, motion and the seed)."""
+    d = settings.to_dict()
+    return {"features": d.get("features"), "motion": d.get("motion"),
+            "seed": settings.search.seed}
+
+
+def prepare_lidar(frames: list[Frame], settings: Settings) -> LidarSteps:
+    """Locate the LiDAR, recover the rings and compensate the motion of ``frames``' sweeps
+    (as :func:`paretocal.calibrate` does), to be reused for every camera of a rig."""
+    frames, lidar_info, first_rings = locate_lidar(frames, settings)
+    rings = sweep_rings(frames, settings, first_rings)
+    frames, motion_info = compensate_motion(frames, settings)
+    return LidarSteps(frames, lidar_info, rings, motion_info, lidar_settings_key(settings))

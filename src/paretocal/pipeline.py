@@ -24,8 +24,8 @@ from .quality import quality_report
 from .search import coarse_seeds, polish_front, run_nsga2
 from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
-from .inputs import (compensate_motion, locate_lidar, resolve_init, sweep_rings,  # noqa: F401
-                     warn_rings, warn_unlocated, describe_inputs)
+from .inputs import (LidarSteps, compensate_motion, lidar_settings_key, locate_lidar,  # noqa: F401
+                     resolve_init, sweep_rings, warn_rings, warn_unlocated, describe_inputs)
 from .objective import get_evaluator
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
@@ -39,7 +39,8 @@ log = logging.getLogger(__name__)
 
 def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None,
               settings: Settings | None = None, progress=None,
-              checkpoint: Checkpoint | None = None) -> CalibrationResult:
+              checkpoint: Checkpoint | None = None,
+              lidar: LidarSteps | None = None) -> CalibrationResult:
     """Calibrate the camera-LiDAR extrinsic of a set of frames.
 
     Parameters
@@ -56,6 +57,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         Save the search every few generations and resume from a saved state of the same run
         (see :mod:`paretocal.search.checkpoint`); an interrupt during the search raises
         :class:`~paretocal.search.checkpoint.SearchInterrupted`.
+    lidar : LidarSteps, optional
+        The LiDAR-only steps (:func:`~paretocal.inputs.prepare_lidar`) already done on these
+        frames' clouds, for another camera of the rig: ``source`` must then be frames over the
+        same clouds; they are not done again.
 
     Returns
     -------
@@ -69,14 +74,21 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         frames = _load(source, settings)
     check_population_memory(settings.search.pop, len(frames))
     T_init, T_ref = resolve_init(frames, T_init)
-    with _timed(timings, "lidar_pose"):
-        frames, lidar_info, first_rings = locate_lidar(frames, settings)
-    with _timed(timings, "rings"):
-        # Rings from the sweeps as recorded (each return on its laser's cone about the
-        # sensor); everything else from the sweeps de-skewed to the image time.
-        rings = sweep_rings(frames, settings, first_rings)
-    with _timed(timings, "motion"):
-        frames, motion_info = compensate_motion(frames, settings)
+    if lidar is not None:
+        if lidar.settings_key != lidar_settings_key(settings):
+            raise SettingsError("the LiDAR steps given were done with other feature, motion "
+                                "or seed settings")
+        frames = lidar.for_camera(frames)
+        lidar_info, rings, motion_info = lidar.lidar_info, lidar.rings, lidar.motion_info
+    else:
+        with _timed(timings, "lidar_pose"):
+            frames, lidar_info, first_rings = locate_lidar(frames, settings)
+        with _timed(timings, "rings"):
+            # Rings from the sweeps as recorded (each return on its laser's cone about the
+            # sensor); everything else from the sweeps de-skewed to the image time.
+            rings = sweep_rings(frames, settings, first_rings)
+        with _timed(timings, "motion"):
+            frames, motion_info = compensate_motion(frames, settings)
     with _timed(timings, "features"):
         # A resumed run decides with the cost model the interrupted run measured.
         stored = checkpoint.stored_cost_model() if checkpoint is not None else None

@@ -33,7 +33,7 @@ import numpy as np
 
 from .config import Settings, settings_from_mapping
 from .errors import Interrupted, ParetocalError
-from .io import load_frames
+from .io import load_frames, rig_source
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
 from .pipeline import calibrate
@@ -131,7 +131,8 @@ class _RunCheckpoint(Checkpoint):
 def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
                   settings: Settings | None = None, frames: list[Frame] | None = None,
                   figures: bool = True, checkpoint_every: int = 5,
-                  progress=None) -> CalibrationResult:
+                  progress=None, rig_camera: str | None = None,
+                  lidar=None) -> CalibrationResult:
     """Calibrate ``source`` into the run folder ``out``, resumable.
 
     Parameters
@@ -149,6 +150,12 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
         Generations between checkpoints; 0 for none (the run then cannot be resumed).
     progress : callable, optional
         As for :func:`paretocal.calibrate`.
+    rig_camera : str, optional
+        ``source`` is a rig folder (:func:`paretocal.io.rig_cameras`) and this is the camera
+        calibrated (recorded for the resume).
+    lidar : LidarSteps, optional
+        The LiDAR-only steps already done on ``frames``' clouds (see
+        :func:`paretocal.calibrate`).
 
     Raises
     ------
@@ -162,7 +169,8 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
     out = Path(out)
     if frames is None:
         try:
-            frames = load_frames(source, settings.frames, settings.camera)
+            src = source if rig_camera is None else rig_source(source, rig_camera)
+            frames = load_frames(src, settings.frames, settings.camera)
         except KeyboardInterrupt:
             raise Interrupted("loading the frames") from None
     with locked(out):
@@ -171,9 +179,11 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
             ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, {
                 "source": str(Path(source).resolve()),
                 "T_init": None if T_init is None else np.asarray(T_init).tolist(),
-                "settings": settings.to_dict(), "figures": bool(figures)})
+                "settings": settings.to_dict(), "figures": bool(figures),
+                **({} if rig_camera is None else {"rig_camera": rig_camera})})
         try:
-            result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt)
+            result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
+                               lidar=lidar)
             try:
                 publish_run(result, out, result.sweeps or frames, figures=figures)
             except KeyboardInterrupt:
@@ -196,10 +206,17 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
 
 def run_arguments(run_dir: str | Path) -> dict:
     """What ``run_dir/run_args.json`` recorded: ``source`` (Path), ``T_init`` (ndarray or
-    None), ``settings`` (Settings) and ``figures`` (bool). One-line error when it is not a run
+    None), ``settings`` (Settings), ``figures`` (bool) and ``rig_camera`` (the camera of a rig
+    folder, or None). One-line error when it is not a run
     folder or the file is damaged."""
     path = Path(run_dir) / RUN_ARGS
     if not path.is_file():
+        cameras = (sorted(p.parent.name for p in Path(run_dir).glob(f"*/{RUN_ARGS}"))
+                   if Path(run_dir).is_dir() else [])
+        if cameras:
+            raise ParetocalError(f"{run_dir}: the run folder of a rig (cameras "
+                                 f"{', '.join(cameras)}); resume one camera with --resume "
+                                 f"{Path(run_dir) / cameras[0]}")
         raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
                              "calibrate (or it was run with --checkpoint-every 0)")
     try:
@@ -207,7 +224,7 @@ def run_arguments(run_dir: str | Path) -> dict:
         settings = settings_from_mapping(args["settings"], str(path))
         T_init = None if args["T_init"] is None else np.asarray(args["T_init"], dtype=float)
         return {"source": Path(args["source"]), "T_init": T_init, "settings": settings,
-                "figures": bool(args["figures"])}
+                "figures": bool(args["figures"]), "rig_camera": args.get("rig_camera")}
     except (ValueError, KeyError, TypeError) as exc:
         raise ParetocalError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
 
@@ -221,4 +238,4 @@ def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
         log.warning("%s: no checkpoint; the run starts over", run_dir)
     return calibrate_run(args["source"], run_dir, args["T_init"], args["settings"],
                          figures=args["figures"], checkpoint_every=max(checkpoint_every, 1),
-                         progress=progress)
+                         progress=progress, rig_camera=args["rig_camera"])

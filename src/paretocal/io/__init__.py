@@ -2,7 +2,8 @@
 
 from .extrinsic import read_extrinsic, write_extrinsic
 from .frame import Frame
-from .layouts import detect_source, load_frames, select_frames
+from .layouts import (detect_source, is_rig, load_frames, load_rig_frames, rig_cameras,
+                      rig_source, select_frames)
 
-__all__ = ["Frame", "detect_source", "load_frames", "read_extrinsic", "select_frames",
-           "write_extrinsic"]
+__all__ = ["Frame", "detect_source", "is_rig", "load_frames", "load_rig_frames", "read_extrinsic",
+           "rig_cameras", "rig_source", "select_frames", "write_extrinsic"]

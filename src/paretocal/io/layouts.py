@@ -464,6 +464,12 @@ def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndar
 def _folder(root: Path) -> Source:
     cpath = root / "calib.yaml"
     data = read_mapping(cpath)
+    if data.get("cameras") is not None:
+        names = ", ".join(name for name, _ in _rig_entries(cpath, data))
+        raise InputError(f"{cpath}: 'cameras' lists the cameras of a rig ({names}): only "
+                         "'paretocal calibrate' takes a rig folder (all its cameras, or one "
+                         "with --camera NAME); give other commands a single-camera folder (in "
+                         "Python: paretocal.io.rig_cameras)")
     camera = _folder_camera(root, cpath, data)
     mask = _folder_mask(root, cpath, data, camera)
     T_ref = None
@@ -479,6 +485,129 @@ def _folder(root: Path) -> Source:
     pairs = _pair(root, root / "images", root / "points")
     return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
                                               bin_layout=layout) for s, i, p in pairs], options)
+
+
+#: The keys of one entry of a rig calib.yaml's ``cameras``.
+RIG_CAMERA_KEYS = ("name", "camera", "camera_info", "mask", "T_cam_lidar", "images")
+
+
+def is_rig(source: str | Path) -> bool:
+    """Whether ``source`` is a generic folder whose calib.yaml lists several cameras
+    (``cameras:``); nothing but calib.yaml is read."""
+    cpath = Path(source) / "calib.yaml"
+    if not cpath.is_file():
+        return False
+    return read_mapping(cpath).get("cameras") is not None
+
+
+def _rig_entries(cpath: Path, data: dict) -> list[tuple[str, dict]]:
+    """The ``cameras`` of a rig calib.yaml as (name, entry): a list of entries with ``name``,
+    or a mapping name -> entry. Names are unique and non-empty."""
+    cams = data.get("cameras")
+    if isinstance(cams, dict):
+        items = []
+        for name, entry in cams.items():
+            if isinstance(entry, dict) and entry.get("name") not in (None, name):
+                raise InputError(f"{cpath}: cameras.{name}.name is {entry['name']!r}; leave it "
+                                 "out or make it the key")
+            items.append((name, entry))
+    elif isinstance(cams, list):
+        items = [(e.get("name") if isinstance(e, dict) else None, e) for e in cams]
+    else:
+        raise InputError(f"{cpath}: cameras must be a list of cameras (each with name, camera, "
+                         "T_cam_lidar and images) or a mapping from name to camera")
+    if not items:
+        raise InputError(f"{cpath}: cameras lists no camera")
+    out, seen = [], set()
+    for i, (name, entry) in enumerate(items):
+        where = f"cameras[{i}]" if isinstance(cams, list) else f"cameras.{name}"
+        if not isinstance(entry, dict):
+            raise InputError(f"{cpath}: {where} must be a mapping with name, camera, "
+                             "T_cam_lidar and images")
+        if not isinstance(name, (str, int)) or isinstance(name, bool) or not str(name).strip():
+            raise InputError(f"{cpath}: {where}.name is missing (each camera needs a name)")
+        name = str(name).strip()
+        if not re.fullmatch(r"[A-Za-z0-9_.-]+", name) or name in (".", ".."):
+            raise InputError(f"{cpath}: {where}.name {name!r}: use letters, digits, '_', '-' "
+                             "and '.' only (it names the camera's output folder)")
+        if name in seen:
+            raise InputError(f"{cpath}: cameras: the name {name!r} is given twice")
+        seen.add(name)
+        unknown = sorted(set(map(str, entry)) - set(RIG_CAMERA_KEYS))
+        if unknown:
+            raise InputError(f"{cpath}: cameras.{name}: unknown key(s) {', '.join(unknown)} "
+                             f"(expected {', '.join(RIG_CAMERA_KEYS)})")
+        out.append((name, entry))
+    return out
+
+
+def _rig_camera(root: Path, cpath: Path, name: str, entry: dict, shared: dict) -> Source:
+    """One camera of a rig folder as a generic-folder source over the shared points/."""
+    prefix = f"cameras.{name}"
+    try:
+        camera = _folder_camera(root, cpath, entry)
+        mask = _folder_mask(root, cpath, entry, camera)
+    except InputError as exc:
+        # The single-camera messages name camera.K, mask, ...: say which camera's.
+        text = str(exc)
+        head = f"{cpath}: "
+        if text.startswith(head):
+            text = f"{head}{prefix}: {text[len(head):]}"
+        raise InputError(text) from None
+    if entry.get("T_cam_lidar") is None:
+        raise InputError(f"{cpath}: {prefix}.T_cam_lidar is missing (each camera of a rig "
+                         "needs its initial extrinsic)")
+    T_ref = check_rigid(entry["T_cam_lidar"], str(cpath), key=f"{prefix}.T_cam_lidar")
+    images = entry.get("images")
+    if not isinstance(images, str) or not images.strip():
+        raise InputError(f"{cpath}: {prefix}.images is missing: the camera's image folder, "
+                         "relative to the rig folder")
+    image_dir = root / images
+    if not _link_file(image_dir).is_dir():
+        raise InputError(f"{cpath}: {prefix}.images: folder {image_dir} {missing(image_dir)}")
+    pairs = _pair(root, image_dir, root / "points")
+    frames = [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=shared["pose"],
+                         bin_layout=shared["layout"]) for s, i, p in pairs]
+    return Source("folder", root, frames, dict(shared["options"], rig_camera=name))
+
+
+def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
+    """The cameras of a rig folder, as ``(name, Source)`` in calib.yaml's order.
+
+    A rig folder is a generic folder whose calib.yaml has ``cameras:`` instead of ``camera``
+    and ``T_cam_lidar``: a list of ``{name, camera (or camera_info), T_cam_lidar, images,
+    mask}`` (or a mapping name -> entry), with one shared ``points/`` folder and the shared
+    keys of a single-camera calib.yaml (``lidar_pose``, ``points``, ``init_error``). Each
+    camera's source is that of a single-camera folder with its images; its frames' ``T_ref``
+    is the camera's ``T_cam_lidar``.
+    """
+    root = Path(source)
+    if not root.is_dir():
+        raise InputError(not_found(root, "source folder"))
+    cpath = root / "calib.yaml"
+    data = read_mapping(cpath)
+    if data.get("cameras") is None:
+        raise InputError(f"{cpath}: not a rig: no 'cameras' list")
+    entries = _rig_entries(cpath, data)
+    clash = [k for k in ("camera", "camera_info", "T_cam_lidar", "mask") if data.get(k) is not None]
+    if clash:
+        raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
+                         "given; with several cameras each entry of cameras holds its own")
+    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")), "options": {}}
+    if data.get("lidar_pose") is not None:
+        shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
+    if data.get("init_error") is not None:
+        shared["options"]["init_error"] = _init_error(cpath, data["init_error"])
+    return [(name, _rig_camera(root, cpath, name, entry, shared)) for name, entry in entries]
+
+
+def rig_source(source: str | Path, name: str) -> Source:
+    """The camera ``name`` of the rig folder ``source`` (:func:`rig_cameras`)."""
+    cams = dict(rig_cameras(source))
+    if name not in cams:
+        raise SettingsError(f"--camera {name}: {Path(source) / 'calib.yaml'} lists the cameras "
+                            f"{', '.join(cams)}")
+    return cams[name]
 
 
 def _points_layout(cpath: Path, section) -> str | None:
@@ -589,13 +718,15 @@ def frame_mask(camera: Camera, mask: np.ndarray | None) -> np.ndarray | None:
     return mask
 
 
-def read_frame(files: FrameFiles) -> Frame:
+def read_frame(files: FrameFiles, clouds: dict | None = None) -> Frame:
     """Read one frame's image and points.
 
     The image is kept as stored, with the camera's full lens model: every projection goes
     through the model (nothing is undistorted, so no field of view is lost and no pixel is
     resampled). The frame's mask is the calib.yaml mask and-ed with the pixels the model
-    reaches (for example the Mei model's fold-back region is masked).
+    reaches (for example the Mei model's fold-back region is masked). ``clouds``, a dict
+    from points path to cloud, is a cache shared by the cameras of a rig: each cloud is read
+    once.
     """
     image = read_image(files.image_path)
     cam = files.camera
@@ -603,7 +734,12 @@ def read_frame(files: FrameFiles) -> Frame:
         raise InputError(f"{files.image_path}: image is {image.shape[1]}x{image.shape[0]} but the "
                          f"calibration says {cam.width}x{cam.height}")
     mask = frame_mask(cam, files.mask)
-    cloud = read_cloud(files.points_path, bin_layout=files.bin_layout)
+    key = (files.points_path, files.bin_layout)
+    cloud = clouds.get(key) if clouds is not None else None
+    if cloud is None:
+        cloud = read_cloud(files.points_path, bin_layout=files.bin_layout)
+        if clouds is not None:
+            clouds[key] = cloud
     return Frame(files.name, image, cloud.points, cam, files.T_ref, files.image_path,
                  files.points_path, kitti_rect=files.kitti_rect, mask=mask, ring=cloud.ring,
                  time=cloud.time, point_fields=dict(cloud.fields),
@@ -630,8 +766,21 @@ def load_frames(source: str | Path | Source, frames: str | None = None,
     list of Frame
     """
     src = source if isinstance(source, Source) else detect_source(Path(source), camera)
+    return _read_selected(src, frames, None)
+
+
+def load_rig_frames(cameras: list[tuple[str, Source]], frames: str | None = None
+                    ) -> dict[str, list[Frame]]:
+    """Read the selected frames of every camera of a rig (:func:`rig_cameras`), each point
+    cloud once: the cameras' frames share their points arrays. ``frames`` selects by stem or
+    by index into each camera's own frames."""
+    clouds: dict = {}
+    return {name: _read_selected(src, frames, clouds) for name, src in cameras}
+
+
+def _read_selected(src: Source, frames: str | None, clouds: dict | None) -> list[Frame]:
     idx = select_frames([f.name for f in src.frames], frames)
-    out = [read_frame(src.frames[i]) for i in idx]
+    out = [read_frame(src.frames[i], clouds) for i in idx]
     # The readers note what they could not find (no intensity field, an odd time unit) per
     # file; say each thing once per source.
     notes = {}

@@ -1,0 +1,254 @@
+"""Several cameras, one LiDAR, one run: every camera of a rig folder calibrated, and what the
+results imply together.
+
+A rig folder's calib.yaml lists its cameras (:func:`paretocal.io.rig_cameras`). Each camera is
+calibrated into its own run folder ``OUT/<name>/`` (:func:`paretocal.rundir.calibrate_run`: a
+normal, resumable run folder); every point cloud is read once and the LiDAR-only steps (the
+LiDAR located in its cloud, the rings, the motion compensation) are done once for all cameras
+over the same clouds (:func:`paretocal.inputs.prepare_lidar`). ``OUT/rig.json`` then holds,
+per camera, the chosen extrinsic and its verdict, and for each pair of cameras:
+
+* the camera-to-camera extrinsic the two results imply, ``T_camA_camB = T_camA_lidar @
+  inv(T_camB_lidar)``, and how far it is from the pair the initial extrinsics imply and, when
+  the runs started elsewhere than calib.yaml, from the pair calib.yaml's extrinsics imply (the
+  reference);
+* the overlap: the share of the LiDAR points in view of either camera (at the chosen
+  extrinsics) that are in view of both;
+* where they overlap, a consistency check: the two calibrations agree when the
+  camera-to-camera extrinsic they imply differs from calib.yaml's (the pair the rig states)
+  by no more, per axis, than the two runs' 95 % intervals combined. Each run's true extrinsic
+  lies within ``T @ D(d)``, ``|d_axis| <= h_axis`` (:func:`paretocal.verdict.intervals`), so
+  the stated pair differs from the implied one by ``D(d_A) D(d_B)^-1``, whose axes are about
+  ``d_A - d_B``; with independent errors, each within ``sqrt(h_A^2 + h_B^2)`` (95 %). The
+  check is only as good as calib.yaml's camera-to-camera extrinsic: it tests whether the two
+  calibrations moved the LiDAR alike relative to a rig whose cameras kept their relative pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import time
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+
+from .camera import project
+from .config import Settings
+from .errors import Interrupted, ParetocalError, SettingsError
+from .geometry import correction_params, invert, pose_error
+from .inputs import prepare_lidar
+from .io import load_rig_frames, rig_cameras
+from .io.atomic import atomic_write_text
+from .quality import AXES
+from .result import CalibrationResult
+from .rundir import calibrate_run
+
+log = logging.getLogger(__name__)
+
+RIG_JSON = "rig.json"
+
+
+def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None = None,
+                  T_inits: dict[str, np.ndarray] | None = None,
+                  cameras: list[str] | None = None, figures: bool = True,
+                  checkpoint_every: int = 5, progress=None, on_camera=None) -> dict:
+    """Calibrate the cameras of the rig folder ``source`` into ``out/<name>/`` and write
+    ``out/rig.json`` (when more than one camera was calibrated).
+
+    Parameters
+    ----------
+    source : path
+        A rig folder (:func:`paretocal.io.rig_cameras`).
+    out : path
+    settings : Settings, optional
+        The same settings for every camera.
+    T_inits : dict, optional
+        Initial ``T_cam_lidar`` by camera name; calib.yaml's for the cameras not in it.
+    cameras : list of str, optional
+        The cameras to calibrate (all by default).
+    figures, checkpoint_every, progress
+        As for :func:`paretocal.rundir.calibrate_run`.
+    on_camera : callable, optional
+        ``on_camera(name, result)`` after each camera's run (for a line on the console).
+
+    Returns
+    -------
+    dict
+        What rig.json holds (also when it is not written: one camera).
+    """
+    settings = (settings or Settings()).validate()
+    source, out = Path(source), Path(out)
+    found = rig_cameras(source)
+    names = [n for n, _ in found]
+    T_inits = dict(T_inits or {})
+    unknown = sorted(set(cameras or ()) - set(names)) + sorted(set(T_inits) - set(names))
+    if unknown:
+        raise SettingsError(f"camera {unknown[0]!r}: {source / 'calib.yaml'} lists the cameras "
+                            f"{', '.join(names)}")
+    if cameras:
+        found = [(n, s) for n, s in found if n in cameras]
+    t0 = time.perf_counter()
+    frames = load_rig_frames(found, settings.frames)
+    steps: dict = {}
+    results: dict[str, CalibrationResult] = {}
+    for name, _ in found:
+        # The LiDAR-only steps once per set of clouds (every camera's, when all cameras have
+        # an image of every selected frame).
+        key = tuple((f.name, str(f.points_path)) for f in frames[name])
+        if key not in steps:
+            steps[key] = prepare_lidar(frames[name], settings)
+        try:
+            results[name] = calibrate_run(source, out / name, T_inits.get(name), settings,
+                                          frames=frames[name], figures=figures,
+                                          checkpoint_every=checkpoint_every,
+                                          progress=progress, rig_camera=name,
+                                          lidar=steps[key])
+        except Interrupted as exc:
+            exc.run_dir = out / name       # the run folder to resume
+            raise
+        except ParetocalError as exc:
+            # The cameras done so far keep their run folders; say which camera failed.
+            raise type(exc)(f"camera {name}: {exc}") from None
+        if on_camera is not None:
+            on_camera(name, results[name])
+    summary = rig_summary(results, settings.features.z_min)
+    summary.update(source=str(source.resolve()), lidar_steps_done=len(steps),
+                   wall_s=round(time.perf_counter() - t0, 2))
+    if len(results) > 1:
+        atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
+    return summary
+
+
+def _err(T: np.ndarray, T_ref: np.ndarray) -> dict:
+    e = pose_error(T, T_ref)
+    return {k: round(float(e[k]), 4) for k in ("rotation_deg", "translation_cm")}
+
+
+def _matrix(T: np.ndarray) -> list:
+    return [[round(float(v), 9) for v in row] for row in np.asarray(T)]
+
+
+def camera_record(name: str, result: CalibrationResult) -> dict:
+    """One camera's line of rig.json."""
+    rel = result.reliability or {}
+    ref = result.reference_error
+    return {"name": name, "run": name, "T_cam_lidar": _matrix(result.T_cam_lidar),
+            "T_init": _matrix(result.T_init), "verdict": rel.get("verdict"),
+            "reasons": rel.get("reasons", []),
+            "reference_error": None if ref is None else {
+                k: round(float(ref[k]), 4) for k in ("rotation_deg", "translation_cm")},
+            "intervals_95": (rel.get("intervals") or {}).get("half_width")}
+
+
+def overlap(a: CalibrationResult, b: CalibrationResult, z_min: float) -> dict:
+    """LiDAR points in view of camera ``a`` and of camera ``b`` at their chosen extrinsics,
+    over the frames both runs used (``a``'s de-skewed sweeps), and the share of those in view
+    of either that are in view of both."""
+    sweeps_b = {f.name: f for f in b.sweeps or []}
+    both = either = in_a = in_b = 0
+    for fa in a.sweeps or []:
+        fb = sweeps_b.get(fa.name)
+        if fb is None or fb.points_path != fa.points_path:
+            continue
+        va = _seen(fa, a.T_cam_lidar, z_min)
+        vb = _seen(dataclasses.replace(fb, points=fa.points), b.T_cam_lidar, z_min)
+        both += int(np.count_nonzero(va & vb))
+        either += int(np.count_nonzero(va | vb))
+        in_a += int(np.count_nonzero(va))
+        in_b += int(np.count_nonzero(vb))
+    return {"points_in_view_a": in_a, "points_in_view_b": in_b, "points_in_both": both,
+            "share_of_either": round(both / either, 4) if either else 0.0}
+
+
+def _seen(frame, T: np.ndarray, z_min: float) -> np.ndarray:
+    """Points of ``frame`` that project into its image at ``T`` onto a usable pixel."""
+    uv, _, visible = project(frame.points, frame.camera, T, z_min)
+    if frame.mask is not None and visible.any():
+        idx = np.flatnonzero(visible)
+        u = np.clip(np.round(uv[idx, 0]).astype(int), 0, frame.camera.width - 1)
+        v = np.clip(np.round(uv[idx, 1]).astype(int), 0, frame.camera.height - 1)
+        visible = visible.copy()
+        visible[idx] = frame.mask[v, u]
+    return visible
+
+
+def consistency(a: CalibrationResult, b: CalibrationResult, T_pair: np.ndarray,
+                against: str) -> dict:
+    """Whether the pair implied by ``a`` and ``b`` agrees with the stated pair ``T_pair``
+    within the two runs' combined 95 % intervals (module docstring)."""
+    G = invert(a.T_cam_lidar) @ T_pair @ b.T_cam_lidar
+    p = correction_params(G)
+    diff = {ax: round(float(v * (100.0 if i < 3 else 1.0)), 4)
+            for i, (ax, v) in enumerate(zip(AXES, p))}
+    units = {ax: ("cm" if i < 3 else "deg") for i, ax in enumerate(AXES)}
+    ha = ((a.reliability or {}).get("intervals") or {}).get("half_width") or {}
+    hb = ((b.reliability or {}).get("intervals") or {}).get("half_width") or {}
+    limit = {ax: (None if ha.get(ax) is None or hb.get(ax) is None
+                  else round(float(np.hypot(ha[ax], hb[ax])), 4)) for ax in AXES}
+    checked = [ax for ax in AXES if limit[ax] is not None]
+    beyond = [ax for ax in checked if abs(diff[ax]) > limit[ax]]
+    out = {"against": against, "difference": diff, "units": units, "limit_95": limit,
+           "axes_checked": checked}
+    if not checked:
+        out.update(verdict="not checked",
+                   reason="neither run determines an axis to a 95 % interval")
+    elif beyond:
+        out.update(verdict="inconsistent", reason="beyond the combined 95 % intervals on " +
+                   ", ".join(f"{ax} ({diff[ax]:+.3g} {units[ax]}, limit {limit[ax]:.3g})"
+                             for ax in beyond))
+    else:
+        out.update(verdict="consistent", reason="within the combined 95 % intervals on " +
+                   ", ".join(checked))
+    return out
+
+
+def pair_record(na: str, a: CalibrationResult, nb: str, b: CalibrationResult,
+                z_min: float) -> dict:
+    """One pair's entry of rig.json (module docstring)."""
+    T_ab = a.T_cam_lidar @ invert(b.T_cam_lidar)
+    init = a.T_init @ invert(b.T_init)
+    rec = {"cameras": [na, nb], "T_a_b": _matrix(T_ab), "T_a_b_initial": _matrix(init),
+           "vs_initial": _err(T_ab, init), "T_a_b_reference": None, "vs_reference": None}
+    # calib.yaml's extrinsics: the reference when the runs started elsewhere, else the start.
+    ref_a = a.T_ref if a.T_ref is not None else a.T_init
+    ref_b = b.T_ref if b.T_ref is not None else b.T_init
+    stated = ref_a @ invert(ref_b)
+    against = "initial (calib.yaml)"
+    if a.T_ref is not None and b.T_ref is not None:
+        rec.update(T_a_b_reference=_matrix(stated), vs_reference=_err(T_ab, stated),
+                   initial_vs_reference=_err(init, stated))
+        against = "reference (calib.yaml)"
+    rec["overlap"] = overlap(a, b, z_min)
+    if rec["overlap"]["points_in_both"] == 0:
+        rec["consistency"] = {"verdict": "not checked", "against": against,
+                              "reason": "no LiDAR point is in view of both cameras"}
+    else:
+        rec["consistency"] = consistency(a, b, stated, against)
+    return rec
+
+
+def rig_summary(results: dict[str, CalibrationResult], z_min: float) -> dict:
+    """rig.json's content for the results by camera name."""
+    return {"cameras": [camera_record(n, r) for n, r in results.items()],
+            "pairs": [pair_record(na, results[na], nb, results[nb], z_min)
+                      for na, nb in combinations(results, 2)]}
+
+
+def pair_line(pair: dict) -> str:
+    """One line per pair for the console."""
+    a, b = pair["cameras"]
+    parts = [f"T_{a}_{b}: {_fmt(pair['vs_initial'])} from the initial pair"]
+    if pair.get("vs_reference"):
+        parts.append(f"{_fmt(pair['vs_reference'])} from the reference pair")
+    ov = pair["overlap"]
+    parts.append(f"{100 * ov['share_of_either']:.1f} % of the points in view are seen by both")
+    c = pair["consistency"]
+    parts.append(f"{c['verdict']} ({c['reason']})")
+    return "; ".join(parts)
+
+
+def _fmt(e: dict) -> str:
+    return f"{e['rotation_deg']:.3f} deg / {e['translation_cm']:.2f} cm"
