@@ -391,3 +391,11 @@ def test_aimotive_pair_residuals_raw_vs_known_speed(aimotive_clouds):
     fixed = pair_residuals(clouds, tau, [fwd] * 2, fwd.pose(dt)[None], rng=0)
     assert fixed[0] < raw[0]
     assert math.isfinite(raw[0]) and raw[0] < 1.0
+
+
+def test_deskew_off_unquoted_in_a_config_file(tmp_path):
+    """YAML reads an unquoted `off` as false; the setting means the word."""
+    from paretocal.config import load_settings
+
+    (tmp_path / "c.yaml").write_text("motion: {deskew: off}\n")
+    assert load_settings(tmp_path / "c.yaml").validate().motion.deskew == "off"

@@ -391,6 +391,9 @@ def _coerce(name: str, value: Any, annotation: str) -> Any:
         ok = number
         value = float(value) if ok else value
     elif kind == "str":
+        if isinstance(value, (bool, np.bool_)):
+            # YAML 1.1 reads an unquoted off/no (on/yes) as false (true): `deskew: off`.
+            value = "on" if value else "off"
         ok = isinstance(value, str) or (number and isinstance(value, numbers.Integral))
         value = str(value) if ok else value
     elif kind.startswith("tuple["):
