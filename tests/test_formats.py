@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import shlex
+from pathlib import Path
 from types import SimpleNamespace
 
 import cv2
@@ -791,3 +792,28 @@ def test_the_kitti_credit_only_on_kitti_frames(tmp_path, raw_frames):
 
     own = load_frames(generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin))[0]
     assert data_credit(raw_frames[0]) == KITTI_CREDIT and data_credit(own) == ""
+
+
+def test_the_readmes_calib_examples_load(tmp_path, raw_frames):
+    """Every calib.yaml example of the README's *Preparing your data* loads as a folder."""
+    text = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    part = text[text.index("## Preparing your data"):text.index("## Calibrating your own data")]
+    blocks = re.findall(r"```yaml\n(.*?)```", part, re.S)
+    assert len(blocks) == 3
+    f = raw_frames[0]
+    for k, block in enumerate(blocks):
+        doc = yaml.safe_load(block)
+        doc.setdefault("T_cam_lidar", f.T_ref.tolist())
+        cam = doc["camera"]
+        root = tmp_path / f"rig{k}"
+        (root / "images").mkdir(parents=True)
+        (root / "points").mkdir()
+        image = cv2.resize(f.image, (cam["width"], cam["height"]))
+        cv2.imwrite(str(root / "images" / f"{f.name}.png"), image)
+        if "mask" in cam:
+            cv2.imwrite(str(root / cam["mask"]), np.full(image.shape[:2], 255, np.uint8))
+        write_points_bin(root / "points", f)
+        (root / "calib.yaml").write_text(yaml.safe_dump(doc))
+        got = detect_source(root).frames[0]
+        assert got.camera.model == {"pinhole": "pinhole", "fisheye": "fisheye",
+                                    "mei": "mei"}[cam["model"]]
