@@ -792,6 +792,12 @@ def test_the_kitti_credit_only_on_kitti_frames(tmp_path, raw_frames):
 
     own = load_frames(generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin))[0]
     assert data_credit(raw_frames[0]) == KITTI_CREDIT and data_credit(own) == ""
+    said = load_frames(generic_folder(tmp_path / "said", raw_frames[:1], write_points_bin,
+                                      extra={"credit": "data: our fleet, 2026"}))[0]
+    assert data_credit(said) == "data: our fleet, 2026"
+    with pytest.raises(InputError, match="credit must be a line of text"):
+        detect_source(generic_folder(tmp_path / "bad", raw_frames[:1], write_points_bin,
+                                     extra={"credit": ["x"]}))
 
 
 def test_the_readmes_calib_examples_load(tmp_path, raw_frames):

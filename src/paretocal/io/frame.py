@@ -50,6 +50,8 @@ class Frame:
         areas the calibration must ignore (calib.yaml's ``camera.mask``, and the pixels the
         lens model cannot reach). A LiDAR point landing on a masked pixel counts as out of the
         image. None: every pixel.
+    credit : str or None
+        The data's credit line for figures (KITTI's for KITTI sources, calib.yaml's ``credit``).
     """
 
     name: str
@@ -65,6 +67,7 @@ class Frame:
     point_fields: dict = field(default_factory=dict)
     sensor_pose: np.ndarray | None = None
     mask: np.ndarray | None = None
+    credit: str | None = None
 
     @property
     def size(self) -> tuple[int, int]:

@@ -26,6 +26,10 @@ from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix,
 log = logging.getLogger(__name__)
 
 
+#: The credit figures of KITTI's data carry (its licence asks for attribution).
+KITTI_CREDIT = "data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0"
+
+
 @dataclass
 class FrameFiles:
     """Paths of one frame before reading, with its calibration."""
@@ -43,6 +47,8 @@ class FrameFiles:
     sensor_pose: np.ndarray | None = None
     #: Declared ``.bin`` column layout (calib.yaml ``points: {layout: NAME}``), or None.
     bin_layout: str | None = None
+    #: The data's credit line for figures (KITTI's for KITTI, calib.yaml ``credit``), or None.
+    credit: str | None = None
 
 
 @dataclass
@@ -163,7 +169,8 @@ def _kitti_raw(root: Path, camera_index: int) -> Source:
     T_ref = check_rigid(rect @ Tr, str(v2c_path))
     pairs = _pair(drive, drive / f"image_0{camera_index}" / "data",
                   drive / "velodyne_points" / "data", point_suffixes=(".bin",))
-    return Source("kitti_raw", drive, [FrameFiles(s, i, p, cam, T_ref, kitti_rect=rect)
+    return Source("kitti_raw", drive, [FrameFiles(s, i, p, cam, T_ref, kitti_rect=rect,
+                                                  credit=KITTI_CREDIT)
                                        for s, i, p in pairs])
 
 
@@ -183,7 +190,7 @@ def _kitti_object(root: Path, camera_index: int) -> Source:
         cam, B = _camera_from_P(P, shape[1], shape[0])
         rect = B @ _rect4(R0)
         frames.append(FrameFiles(stem, img, pts, cam, check_rigid(rect @ Tr, str(cpath)),
-                                 kitti_rect=rect))
+                                 kitti_rect=rect, credit=KITTI_CREDIT))
     return Source("kitti_object", root, frames)
 
 
@@ -483,8 +490,20 @@ def _folder(root: Path) -> Source:
     if data.get("init_error") is not None:
         options["init_error"] = _init_error(cpath, data["init_error"])
     pairs = _pair(root, root / "images", root / "points")
+    credit = _credit(cpath, data)
     return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
-                                              bin_layout=layout) for s, i, p in pairs], options)
+                                              bin_layout=layout, credit=credit)
+                                   for s, i, p in pairs], options)
+
+
+def _credit(cpath: Path, data: dict) -> str | None:
+    """calib.yaml's ``credit``: the line figures of this data carry (a dataset's licence may
+    require one)."""
+    value = data.get("credit")
+    if value is not None and (not isinstance(value, str) or not value.strip()):
+        raise InputError(f"{cpath}: credit must be a line of text (the data's credit for "
+                         f"figures), got {value!r}")
+    return value.strip() if value else None
 
 
 #: The keys of one entry of a rig calib.yaml's ``cameras``.
@@ -567,7 +586,7 @@ def _rig_camera(root: Path, cpath: Path, name: str, entry: dict, shared: dict) -
         raise InputError(f"{cpath}: {prefix}.images: folder {image_dir} {missing(image_dir)}")
     pairs = _pair(root, image_dir, root / "points")
     frames = [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=shared["pose"],
-                         bin_layout=shared["layout"]) for s, i, p in pairs]
+                         bin_layout=shared["layout"], credit=shared["credit"]) for s, i, p in pairs]
     return Source("folder", root, frames, dict(shared["options"], rig_camera=name))
 
 
@@ -593,7 +612,8 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
     if clash:
         raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
                          "given; with several cameras each entry of cameras holds its own")
-    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")), "options": {}}
+    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")), "options": {},
+              "credit": _credit(cpath, data)}
     if data.get("lidar_pose") is not None:
         shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
     if data.get("init_error") is not None:
@@ -743,7 +763,7 @@ def read_frame(files: FrameFiles, clouds: dict | None = None) -> Frame:
     return Frame(files.name, image, cloud.points, cam, files.T_ref, files.image_path,
                  files.points_path, kitti_rect=files.kitti_rect, mask=mask, ring=cloud.ring,
                  time=cloud.time, point_fields=dict(cloud.fields),
-                 sensor_pose=files.sensor_pose)
+                 sensor_pose=files.sensor_pose, credit=files.credit)
 
 
 def load_frames(source: str | Path | Source, frames: str | None = None,

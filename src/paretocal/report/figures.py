@@ -11,14 +11,12 @@ from matplotlib.figure import Figure
 from ..camera import project
 from ..io.atomic import atomic_path
 from ..io.frame import Frame
-
-KITTI_CREDIT = "data: KITTI (Geiger et al., IJRR 2013), CC BY-NC-SA 3.0"
-
+from ..io.layouts import KITTI_CREDIT  # noqa: F401 - the credit's text, for callers
 
 def data_credit(frame: Frame) -> str:
-    """The credit a figure of ``frame`` carries: KITTI's for KITTI frames (they have a
-    ``kitti_rect``), none for a user's own data."""
-    return KITTI_CREDIT if getattr(frame, "kitti_rect", None) is not None else ""
+    """The credit line figures of ``frame`` carry: KITTI's for KITTI frames, calib.yaml's
+    ``credit`` for a folder that states one, none otherwise."""
+    return getattr(frame, "credit", None) or ""
 
 
 def new_figure(figsize=None, dpi=None) -> Figure:
