@@ -2,7 +2,6 @@
 (front pinhole + left Mei fisheye over one points/ folder)."""
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,10 @@ from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import invert, pose_error
 from paretocal.io import detect_source, is_rig, load_rig_frames, rig_cameras
 
-DATA = Path(os.environ.get("PARETOCAL_DATA", "/work/shared/data")) / "aimotive"
+from .conftest import data_dir
+
+# Absolute: the rig's symbolic links are made in a temporary folder.
+DATA = data_dir() / "aimotive"
 pytestmark = pytest.mark.skipif(not (DATA / "front_pinhole" / "calib.yaml").is_file(),
                                 reason="aiMotive sample not available")
 

@@ -115,18 +115,24 @@ def _dataset_options(settings, source, take_init_error: bool):
     """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
     line or the config file already set them; returns ``(settings, detected source)``, the
     source to load the frames from (detected once: its warnings are said once)."""
-    from .config import SearchSettings
     from .io import detect_source
 
     detected = detect_source(Path(source), settings.camera)
-    opts = detected.options
+    return _adopt_init_error(settings, detected.options, take_init_error), detected
+
+
+def _adopt_init_error(settings, options: dict, take: bool):
+    """The dataset's own ``init_error`` (calib.yaml) when ``take`` and no option or config
+    file changed the default."""
+    from .config import SearchSettings
+
     s = settings.search
-    if (take_init_error and "init_error" in opts
+    if (take and "init_error" in options
             and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
                                                        SearchSettings.init_error_m)):
-        deg, m = opts["init_error"]
+        deg, m = options["init_error"]
         settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
-    return settings, detected
+    return settings
 
 
 def read_init(path: Path, source, camera: int | None):
@@ -301,7 +307,6 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     and ``out/rig.json`` (:mod:`paretocal.rig`)."""
     import dataclasses
 
-    from .config import SearchSettings
     from .errors import Interrupted
     from .io import rig_cameras
     from .io.atomic import check_output_dir
@@ -318,13 +323,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
                             "--camera NAME")
     if frames is not None:
         settings = dataclasses.replace(settings, frames=frames)
-    opts = cams[0][1].options
-    s = settings.search
-    if (take_init_error and "init_error" in opts
-            and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
-                                                       SearchSettings.init_error_m)):
-        deg, m = opts["init_error"]
-        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    settings = _adopt_init_error(settings, cams[0][1].options, take_init_error)
     settings.validate()
     check_output_dir(out)
     T_inits = {camera: read_init(init, source, None)} if init is not None else None

@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import InputError
 from ..geometry import check_rigid, invert
 from .atomic import atomic_write_text
+from .extrinsic import quaternion_pose
 from .readers import calib_matrix, read_kitti_calib, read_mapping
 
 KITTI_FILE = "calib_velo_to_cam.txt"
@@ -174,14 +175,7 @@ def read_tf_static(path: str | Path) -> tuple[np.ndarray, str, str]:
                          "transform.rotation.x/y/z/w numbers)") from None
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
         raise InputError(f"{path}: transforms[0] has NaN or infinite values")
-    norm = np.linalg.norm(q)
-    if abs(norm - 1.0) > 1e-3:
-        raise InputError(f"{path}: transforms[0].transform.rotation is not a unit quaternion "
-                         f"(norm {norm:.6g})")
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
-    T[:3, 3] = t
-    return T, parent, child
+    return quaternion_pose(path, "transforms[0].transform.rotation", t, q), parent, child
 
 
 def extrinsic_inverse_text(T_cam_lidar: np.ndarray, version: str = "") -> str:

@@ -106,8 +106,6 @@ def _vector(path: Path, name: str, value, names: str) -> np.ndarray:
 
 def _pose(path: Path, key: str, value: dict) -> np.ndarray:
     """A 4x4 transform from ``{translation, quaternion_xyzw | quaternion_wxyz | rotation}``."""
-    from scipy.spatial.transform import Rotation
-
     if "translation" not in value:
         raise InputError(f"{path}: {key} needs 'translation' with the rotation (keys found: "
                          f"{', '.join(map(str, value))})")
@@ -126,12 +124,20 @@ def _pose(path: Path, key: str, value: dict) -> np.ndarray:
                              "y, z?); write quaternion_xyzw or quaternion_wxyz, or a mapping "
                              "with keys x, y, z, w")
         q = _vector(path, f"{key}.{name}", value[name], "xyzw")
+    return quaternion_pose(path, f"the rotation of {key}", t, q)
+
+
+def quaternion_pose(path: Path, name: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The 4x4 transform of a translation ``t`` (3,) and a quaternion ``q`` (x, y, z, w),
+    which must be of unit norm (to 1e-3: written values carry a few digits) and is then
+    normalised; ``name`` says which rotation in the error."""
+    from scipy.spatial.transform import Rotation
+
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > 1e-3:
-        raise InputError(f"{path}: the rotation of {key} is not a unit quaternion "
-                         f"(norm {norm:.6g})")
+        raise InputError(f"{path}: {name} is not a unit quaternion (norm {norm:.6g})")
     T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
+    T[:3, :3] = Rotation.from_quat(np.asarray(q, dtype=np.float64) / norm).as_matrix()
     T[:3, 3] = t
     return T
 
