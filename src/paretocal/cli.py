@@ -802,8 +802,11 @@ def _interrupted(command: str | None) -> int:
     return 130
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``paretocal`` console script; returns the exit status."""
+def main(argv: list[str] | None = None, final: bool = False) -> int:
+    """Entry point of the ``paretocal`` console script; returns the exit status.
+
+    ``final``: the process exits right after (the console script): SIGINT and SIGTERM are then
+    left ignored instead of restored, so a late second Ctrl-C cannot interrupt the exit."""
     import signal
     import threading
 
@@ -845,7 +848,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            signal.signal(sig, signal.SIG_IGN if final else handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

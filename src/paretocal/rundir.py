@@ -211,7 +211,8 @@ def run_arguments(run_dir: str | Path) -> dict:
     folder or the file is damaged."""
     path = Path(run_dir) / RUN_ARGS
     if not path.is_file():
-        cameras = (sorted(p.parent.name for p in Path(run_dir).glob(f"*/{RUN_ARGS}"))
+        cameras = (sorted(p.parent.name for p in Path(run_dir).glob(f"*/{RUN_ARGS}")
+                          if _rig_camera_of(p) is not None)
                    if Path(run_dir).is_dir() else [])
         if cameras:
             raise ParetocalError(f"{run_dir}: the run folder of a rig (cameras "
@@ -227,6 +228,16 @@ def run_arguments(run_dir: str | Path) -> dict:
                 "figures": bool(args["figures"]), "rig_camera": args.get("rig_camera")}
     except (ValueError, KeyError, TypeError) as exc:
         raise ParetocalError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
+
+
+def _rig_camera_of(run_args: Path) -> str | None:
+    """The rig camera a ``run_args.json`` records, or None (a single-camera run, or a file
+    that cannot be read: the caller then reports the folder as it is)."""
+    try:
+        found = json.loads(run_args.read_text()).get("rig_camera")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return found if isinstance(found, str) else None
 
 
 def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
