@@ -1,7 +1,8 @@
 """An interactive, self-contained HTML page of a calibration run (``interactive.html``).
 
-The page needs no network access: plotly.js is embedded inline, the camera image is a base64
-JPEG and the LiDAR points a base64 float32 array. The Pareto front is a Plotly scatter; the
+The page needs no network access and no plotting library: the Pareto front is an SVG scatter
+drawn by the page's own script (``front_plot.js``, a few kilobytes), the camera image is a base64
+JPEG and the LiDAR points a base64 float32 array. The
 projection of the first frame's points is drawn client-side on a canvas, with the extrinsic of
 the solution clicked on the front, or the initial, chosen or reference extrinsic. The page
 projects through the camera's own model (pinhole with radial-tangential distortion, fisheye,
@@ -9,7 +10,7 @@ Mei) with the arithmetic of :meth:`paretocal.camera.Camera.project_camera_points
 image as it was taken.
 
 The page's skeleton, style sheet and script are package data in ``report/templates/``
-(``interactive.html``, ``interactive.css``, ``interactive.js``); the skeleton's ``$name``
+(``interactive.html``, ``interactive.css``, ``front_plot.js``, ``interactive.js``); the skeleton's ``$name``
 placeholders are filled with :class:`string.Template`.
 """
 
@@ -34,11 +35,6 @@ MAX_POINTS = 20000
 #: Depth (m) at the cold end of the colour scale, as in the static overlays.
 MAX_DEPTH = 30.0
 JPEG_QUALITY = 88
-
-# Runs after Plotly.newPlot resolves (plotly's ``post_script``).
-POST_SCRIPT = ("window.paretocalPlotReady = true; "
-               "document.dispatchEvent(new Event('paretocal-plot-ready'));")
-
 
 def _json_script(obj) -> str:
     """JSON text safe inside ``<script type="application/json">`` (no ``<``, ``>``, ``&``)."""
@@ -84,7 +80,7 @@ def _solution_entries(result) -> list[dict]:
         ms, nbytes = float(cols["ms"][i]), int(round(cols["bytes"][i]))
         dev = float(cols["deviation_px"][i]) if "deviation_px" in cols else None
         tag = " (chosen)" if i == result.chosen else ""
-        hover = [f"<b>solution {i}{tag}</b>",
+        hover = [f"solution {i}{tag}",
                  f"x, y, z = {x[0] * 100:+.2f}, {x[1] * 100:+.2f}, {x[2] * 100:+.2f} cm",
                  f"yaw, pitch, roll = {x[3]:+.3f}, {x[4]:+.3f}, {x[5]:+.3f} deg",
                  f"n = {n} points/frame",
@@ -102,44 +98,22 @@ def _solution_entries(result) -> list[dict]:
             hover.append(f"error vs reference = {_fmt_err(rot, tr)}")
             cap += f"; error vs reference {_fmt_err(rot, tr)}"
             entry.update(ref_rotation_deg=rot, ref_translation_cm=tr)
-        entry["hover"] = "<br>".join(hover)
+        entry["hover"] = hover
         entry["caption"] = cap
         out.append(entry)
     return out
 
 
-def _figure(result, solutions: list[dict]):
-    import plotly.graph_objects as go
-
-    cols, i = result.front.columns, result.chosen
-    has_ref = "ref_rotation_deg" in cols
-    marker = dict(size=9, line=dict(width=0.6, color="#333"))
-    if has_ref:
-        marker.update(color=[s["ref_rotation_deg"] for s in solutions], colorscale="Viridis",
-                      showscale=True, colorbar=dict(title=dict(text="rot. error (deg)"), len=0.8))
-    else:
-        marker.update(color="#1f77b4")
-    fig = go.Figure()
-    fig.add_trace(go.Scatter(
-        x=[s["f1"] for s in solutions], y=[s["f2"] for s in solutions], mode="markers",
-        name="Pareto front", marker=marker, customdata=list(range(len(solutions))),
-        text=[s["hover"] for s in solutions], hovertemplate="%{text}<extra></extra>"))
-    fig.add_trace(go.Scatter(
-        x=[solutions[i]["f1"]], y=[solutions[i]["f2"]], mode="markers",
-        name=f"chosen ({result.decision.get('rule', '?')}, n = {result.n_points})",
-        marker=dict(symbol="star", size=20, color="#d62728", line=dict(width=1, color="#000")),
-        customdata=[i], text=[solutions[i]["hover"]], hovertemplate="%{text}<extra></extra>"))
-    fig.add_trace(go.Scatter(
-        x=[solutions[i]["f1"]], y=[solutions[i]["f2"]], mode="markers", name="shown below",
-        marker=dict(symbol="circle-open", size=22, color="#000", line=dict(width=2)),
-        hoverinfo="skip"))
-    fig.update_layout(
-        template="plotly_white", hovermode="closest", height=460,
-        margin=dict(l=60, r=20, t=30, b=50),
-        xaxis=dict(title=dict(text="f1: Chamfer objective (px, lower is better)")),
-        yaxis=dict(title=dict(text="f2: normalised cost (t_norm + m_norm)")),
-        legend=dict(orientation="h", yanchor="bottom", y=1.02, x=0, font=dict(size=11)))
-    return fig
+def _plot_spec(result, solutions: list[dict]) -> dict:
+    """What the page's own SVG plot of the front needs besides the solutions: axis titles,
+    the colour of each solution (its rotation error vs the reference, when known) and the
+    chosen solution's legend entry."""
+    has_ref = "ref_rotation_deg" in result.front.columns
+    return {"x_title": "f1: Chamfer objective (px, lower is better)",
+            "y_title": "f2: normalised cost (t_norm + m_norm)",
+            "color": [s["ref_rotation_deg"] for s in solutions] if has_ref else None,
+            "color_title": "rot. error (deg)",
+            "chosen_label": f"chosen ({result.decision.get('rule', '?')}, n = {result.n_points})"}
 
 
 def _run_table(result, frame: Frame) -> str:
@@ -191,8 +165,9 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
                       max_points: int = MAX_POINTS) -> Path:
     """Write the interactive report page of a calibration run.
 
-    The page is a single self-contained HTML file that makes no network request: plotly.js is
-    embedded inline, the camera image as a base64 JPEG and the LiDAR points as base64 float32.
+    The page is a single self-contained HTML file that makes no network request: its script
+    draws the front as SVG, the camera image is a base64 JPEG and the LiDAR points base64
+    float32.
     It shows the Pareto front (hover for a solution's variables, cost, deviation and reference
     errors; click to project with it), the projection of one frame's LiDAR points drawn on a
     canvas by depth (near is warm) with buttons for the initial, chosen and reference
@@ -255,28 +230,25 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
         "chosen": int(result.chosen),
         "T_init": np.asarray(result.T_init, dtype=float).tolist(),
         "T_ref": None if result.T_ref is None else np.asarray(result.T_ref, dtype=float).tolist(),
-        "solutions": [{k: v for k, v in s.items() if k != "hover"} for s in solutions],
+        "solutions": solutions, "plot": _plot_spec(result, solutions),
         "captions": captions, "lut": _depth_lut(),
     }
-    plot = _figure(result, solutions).to_html(
-        full_html=False, include_plotlyjs=True, div_id="pareto",
-        config={"displaylogo": False, "showSendToCloud": False, "responsive": True},
-        post_script=POST_SCRIPT)
     buttons = ['<button type="button" data-view="initial" id="view-initial">initial</button>',
                '<button type="button" data-view="chosen" id="view-chosen">chosen</button>']
     if result.T_ref is not None:
         buttons.append('<button type="button" data-view="reference" id="view-reference">'
                        'reference</button>')
     # interactive.html puts the run table before the plot (the grid shows it on the right), so
-    # the plot's container has its final width when plotly.js sizes the figure.
+    # the plot's container has its final width when the script sizes the figure.
     title = f"paretocal calibration run: {len(result.frames)} frame(s), n = {result.n_points}"
-    # substitute() fails on a missing placeholder; the values (the script, plotly.js) are not
+    # substitute() fails on a missing placeholder; the values (the script, the data) are not
     # scanned, so a $ in them is inert.
     page = Template(template("interactive.html")).substitute(
         title=html.escape(title), verdict=_verdict_banner(result), frame_name=html.escape(f.name),
-        run_table=_run_table(result, f), plot=plot, buttons="".join(buttons),
+        run_table=_run_table(result, f), buttons="".join(buttons),
         width=int(cam.width), height=int(cam.height), max_depth=f"{MAX_DEPTH:g}",
         n_points=len(pts), max_points=max_points, credit=html.escape(data_credit(f)),
-        data=_json_script(data), css=template("interactive.css"), js=template("interactive.js"))
+        data=_json_script(data), css=template("interactive.css"),
+        js=template("front_plot.js") + template("interactive.js"))
     atomic_write_text(path, page)
     return path

@@ -5,7 +5,7 @@
   var caption = document.getElementById("caption"), W = D.width, H = D.height;
   var bin = atob(D.points.b64), buf = new Uint8Array(bin.length);
   for (var b = 0; b < bin.length; b++) buf[b] = bin.charCodeAt(b);
-  var P = new Float32Array(buf.buffer), N = D.points.count, gd = null;
+  var P = new Float32Array(buf.buffer), N = D.points.count, selectOnPlot = null;
   var img = new Image(), pending = null, plotReady = false, imageReady = false;
   // The camera model as paretocal.camera.Camera.kernel_params (null stands for infinity).
   var C = D.camera.params.map(function (v) { return v === null ? Infinity : v; });
@@ -103,9 +103,7 @@
       var on = v === key || (v === "chosen" && key === String(D.chosen));
       btns[m].className = on ? "active" : "";
     }
-    if (gd && plotReady) {
-      Plotly.restyle(gd, {x: [sel ? [sel.f1] : []], y: [sel ? [sel.f2] : []]}, [2]);
-    }
+    if (selectOnPlot) selectOnPlot(sel ? D.solutions.indexOf(sel) : null);
   }
 
   function ready() {
@@ -113,12 +111,7 @@
   }
 
   function attachPlot() {
-    if (plotReady) return;
-    gd = document.getElementById("pareto");
-    gd.on("plotly_click", function (ev) {
-      var p = ev && ev.points && ev.points[0];
-      if (p && typeof p.customdata === "number") show(p.customdata);
-    });
+    selectOnPlot = plotFront(document.getElementById("pareto"), D, function (i) { show(i); });
     plotReady = true;
     ready();
   }
@@ -134,6 +127,5 @@
   };
   img.src = D.image;
   window.paretocal = {show: show, data: D};
-  if (window.paretocalPlotReady) attachPlot();
-  else document.addEventListener("paretocal-plot-ready", attachPlot);
+  attachPlot();
 })();
