@@ -40,6 +40,28 @@ class TestEvaluators:
         for u, v in zip(a, b):
             np.testing.assert_allclose(u, v, rtol=1e-9, atol=1e-6)
 
+    def test_the_order_of_the_candidates_changes_no_sum(self, scene_and_feats, rng):
+        """The kernel deals candidates to threads by n (balanced_order); every candidate's
+        sums stay bitwise what they are alone, whatever the order or the thread count."""
+        from paretocal.objective.kernel import balanced_order
+
+        scene, feats, T = scene_and_feats
+        X = _population(T, int(scene.points_per_frame.max()), rng, C=40)
+        X = X[np.argsort(X[:, 6])]                    # sorted by n, as a polish sends them
+        A, n = apply_correction(T, X), X[:, 6].astype(np.int64)
+        whole = sums_numba(scene, A, n)
+        shuffled = rng.permutation(len(X))
+        again = sums_numba(scene, A[shuffled], n[shuffled])
+        one = [sums_numba(scene, A[i:i + 1], n[i:i + 1]) for i in range(len(X))]
+        for k in range(3):
+            np.testing.assert_array_equal(again[k], whole[k][shuffled])
+            np.testing.assert_array_equal(np.concatenate([o[k] for o in one]), whole[k])
+        perm = balanced_order(n, 2)
+        assert sorted(perm) == list(range(len(n)))
+        halves = [n[perm[:20]].sum(), n[perm[20:]].sum()]
+        assert abs(halves[0] - halves[1]) <= n.max()   # in the caller's order: far apart
+        assert abs(n[:20].sum() - n[20:].sum()) > n.max()
+
     def test_close_to_exact_kdtree_oracle(self, scene_and_feats, rng):
         scene, feats, T = scene_and_feats
         X = _population(T, int(scene.points_per_frame.max()), rng, C=8)

@@ -315,6 +315,7 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     if not HAVE_NUMBA:  # pragma: no cover
         raise RuntimeError("numba is not available; use the numpy evaluator")
     R = _rigid(T)
+    n = np.ascontiguousarray(n, dtype=np.int64)
     C, F = len(R), scene.n_frames
     S1, S2, NIN = _empty_sums(C, F)
     q = scene.dt_scale
@@ -324,16 +325,35 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
         # search evaluating one pose at a time) their start-up and barriers cost more than the
         # work: one candidate on 5 frames took 1 ms on one thread, 8-20 ms on two.
         numba.set_num_threads(1)
+    perm = balanced_order(n, numba.get_num_threads())
     try:
-        _sums_numba(R, scene.cam_params, np.ascontiguousarray(n, dtype=np.int64),
-                    scene.x, scene.y, scene.z, scene.weight, scene.group, scene.point_start,
-                    scene.dtq, scene.dt_start, scene.width, scene.height, scene.has_mask,
+        _sums_numba(R[perm], scene.cam_params, n[perm], scene.x, scene.y, scene.z,
+                    scene.weight, scene.group, scene.point_start, scene.dtq, scene.dt_start,
+                    scene.width, scene.height, scene.has_mask,
                     scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN)
     finally:
         numba.set_num_threads(threads)
+    # Each candidate's sums do not depend on the order: put them back in the caller's.
+    S1[perm], S2[perm], NIN[perm] = S1.copy(), S2.copy(), NIN.copy()
     S1 *= q
     S2 *= q * q
     return S1, S2, NIN
+
+
+def balanced_order(n: np.ndarray, threads: int) -> np.ndarray:
+    """An order of the candidates (C,) in which the contiguous blocks a static parallel loop
+    gives each of ``threads`` threads carry about the same number of points.
+
+    A polish evaluates each solution's stencil together, solutions sorted by ``n``: in the
+    caller's order one thread got the small ``n`` and the other the large (129 M points/s on
+    two cores for 400 candidates of sorted ``n`` on 20 KITTI frames, 186 M dealt out like
+    this). Sorting by ``n`` and dealing every ``threads``-th candidate to one block balances
+    them; the sums are the same in any order.
+    """
+    if threads <= 1 or len(n) < 2 * threads:
+        return np.arange(len(n))
+    order = np.argsort(n, kind="stable")
+    return np.concatenate([order[t::threads] for t in range(threads)])
 
 
 def _frame_points(scene: Scene, f: int) -> np.ndarray:
