@@ -1,5 +1,6 @@
 """Ring recovery against exact truth on rig variants of real KITTI sweeps (made at run time)."""
 
+import numpy as np
 import pytest
 
 from paretocal.features.prepare import sensor_points
@@ -109,3 +110,18 @@ def test_a_model_that_does_not_fit_is_replaced(sweeps):
     r = recover_rings(v.points, model=first)
     assert r.n_rings == 64 and ring_accuracy(r.ring, v.ring) >= 0.99
     assert any("earlier sweep's line model" in n for n in r.notes)
+
+
+def test_group_sigma_is_each_labels_own_sigma(rng):
+    """The grouped robust scatter equals the one-label formula on every label (odd and even
+    counts, a label with one point, labels without points)."""
+    from paretocal.features.rings import _group_sigma, _sigma
+
+    lab = np.concatenate([rng.integers(0, 9, 5000), [11]])
+    r = np.abs(rng.normal(size=len(lab)))
+    got = _group_sigma(r, lab, 13)
+    for k in range(13):
+        if (lab == k).any():
+            assert got[k] == _sigma(r[lab == k])
+        else:
+            assert np.isnan(got[k])

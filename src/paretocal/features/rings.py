@@ -266,12 +266,17 @@ def _group_sigma(r: np.ndarray, lab: np.ndarray, n: int) -> np.ndarray:
     out = np.full(n, np.nan)
     if len(r) == 0:
         return out
-    order = np.lexsort((r, lab))
-    rs, ls = r[order], lab[order]
+    # Group by label (a stable integer sort, linear), then each group's two middle values by
+    # partition: the same medians as sorting every residual, in less than half the time (the
+    # float sort of ~130 000 residuals was 1.3 s of a 20-sweep run).
+    order = np.argsort(lab, kind="stable")
+    ls, rs = lab[order], r[order]
     starts = np.flatnonzero(np.r_[True, ls[1:] != ls[:-1]])
-    count = np.diff(np.r_[starts, len(rs)])
-    med = 0.5 * (rs[starts + (count - 1) // 2] + rs[starts + count // 2])
-    out[ls[starts]] = 1.4826 * med + 1e-7
+    ends = np.r_[starts[1:], len(rs)]
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        k1, k2 = (b - a - 1) // 2, (b - a) // 2
+        mid = np.partition(rs[a:b], (k1, k2))
+        out[ls[a]] = 1.4826 * (0.5 * (mid[k1] + mid[k2])) + 1e-7
     return out
 
 
