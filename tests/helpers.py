@@ -66,3 +66,26 @@ def box_scene(rng, width=640, height=480, f=500.0):
     (u0, v0), (u1, v1) = np.round(uv).astype(int)
     img[v0:v1 + 1, u0:u1 + 1] = 220
     return K, img, points, T
+
+
+def run_cli(capfd, *args):
+    """The command line in this process: ``(exit status, stdout, stderr)``."""
+    from paretocal.cli import main
+
+    code = main([str(a) for a in args])
+    out, err = capfd.readouterr()
+    return code, out, err
+
+
+def bad_cli(capfd, *args, expect: str | tuple[str, ...]) -> str:
+    """Run the CLI; assert exit 2 and exactly one line on stderr holding every ``expect``
+    (and no traceback); returns the line."""
+    code, out, err = run_cli(capfd, *args)
+    assert code == 2, (code, out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("paretocal: error: "), err
+    for e in (expect,) if isinstance(expect, str) else expect:
+        assert e in lines[0], lines[0]
+    assert "Traceback" not in err
+    return lines[0]
+

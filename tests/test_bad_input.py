@@ -32,28 +32,10 @@ from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
-from .helpers import write_generic
+from .helpers import bad_cli as bad, run_cli as run, write_generic
 
 FAST = ["--pop", "16", "--gens", "3", "--no-polish", "--frames", "0:2", "--no-figures",
         "--checkpoint-every", "0"]
-
-
-def run(capfd, *args):
-    code = main([str(a) for a in args])
-    out, err = capfd.readouterr()
-    return code, out, err
-
-
-def bad(capfd, *args, expect: str | tuple[str, ...]) -> str:
-    """Run the CLI; assert exit 2 and exactly one line on stderr holding every ``expect``."""
-    code, out, err = run(capfd, *args)
-    assert code == 2, (code, out, err)
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("paretocal: error: "), err
-    for e in (expect,) if isinstance(expect, str) else expect:
-        assert e in lines[0], lines[0]
-    assert "Traceback" not in err
-    return lines[0]
 
 
 @pytest.fixture

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 import yaml
 
-from paretocal.cli import main
 from paretocal.io import load_frames, read_extrinsic, write_extrinsic
 from paretocal.io.bags import (camera_from_info, cloud_array, compressed_image, image_array,
                                pair_by_stamp)
+
+from .helpers import bad_cli as bad, run_cli as run
 
 if (os.environ.get("PARETOCAL_REQUIRE_OPTIONAL") == "1"
         and importlib.util.find_spec("rosbags") is None):
@@ -37,21 +38,6 @@ PERIOD = 100_000_000                     # 10 Hz, ns
 KINDS = ("ros1", "sqlite3", "mcap")
 
 
-def run(capfd, *args):
-    code = main([str(a) for a in args])
-    out, err = capfd.readouterr()
-    return code, out, err
-
-
-def bad(capfd, *args, expect) -> str:
-    """Run the CLI; assert exit 2 and one line on stderr holding every ``expect``."""
-    code, out, err = run(capfd, *args)
-    assert code == 2, (code, out, err)
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("paretocal: error: "), err
-    for e in (expect,) if isinstance(expect, str) else expect:
-        assert e in lines[0], lines[0]
-    return lines[0]
 
 
 # --- building messages and bags ------------------------------------------------------------------
