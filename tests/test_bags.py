@@ -38,8 +38,6 @@ PERIOD = 100_000_000                     # 10 Hz, ns
 KINDS = ("ros1", "sqlite3", "mcap")
 
 
-
-
 # --- building messages and bags ------------------------------------------------------------------
 
 
