@@ -41,6 +41,27 @@ KINDS = ("ros1", "sqlite3", "mcap")
 # --- building messages and bags ------------------------------------------------------------------
 
 
+def cloud_bytes(rec: np.ndarray, offsets: dict, step: int, bigendian: bool = False,
+                height: int = 1, row_pad: int = 0):
+    """A PointCloud2's payload for the record array ``rec``: each field at ``offsets[name]``
+    in ``step``-byte points of either byte order, ``height`` rows each followed by ``row_pad``
+    filler bytes. Returns ``(rows (height, width * step + row_pad) uint8, width, [(name,
+    offset, datatype code)])``."""
+    codes = {"i1": 1, "u1": 2, "i2": 3, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
+    names = list(rec.dtype.names)
+    order = ">" if bigendian else "<"
+    stored = np.dtype({"names": names, "offsets": [offsets[n] for n in names],
+                       "formats": [rec.dtype[n].newbyteorder(order) for n in names],
+                       "itemsize": step})
+    arr = np.zeros(len(rec), stored)
+    for n in names:
+        arr[n] = rec[n]
+    width = len(rec) // height
+    rows = np.hstack([arr.view(np.uint8).reshape(height, width * step),
+                      np.full((height, row_pad), 0xAB, np.uint8)])
+    return rows, width, [(n, offsets[n], codes[rec.dtype[n].str[1:]]) for n in names]
+
+
 @pytest.fixture(scope="module")
 def frames(data):
     return load_frames(data / "kitti_raw" / "2011_09_26", frames="0:3")
@@ -97,22 +118,10 @@ class Msgs:
         in ``rec``'s order), ``point_step`` adds padding after each point, ``row_pad`` after
         each row of an organised cloud (``height`` rows)."""
         PF = self.t["sensor_msgs/msg/PointField"]
-        codes = {"i1": 1, "u1": 2, "i2": 3, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
-        names = rec.dtype.names
-        offsets = layout or {n: rec.dtype.fields[n][1] for n in names}
-        order = ">" if bigendian else "<"
+        offsets = layout or {n: rec.dtype.fields[n][1] for n in rec.dtype.names}
         step = point_step or rec.dtype.itemsize
-        stored = np.dtype({"names": list(names), "offsets": [offsets[n] for n in names],
-                           "formats": [rec.dtype[n].newbyteorder(order) for n in names],
-                           "itemsize": step})
-        arr = np.zeros(len(rec), stored)
-        for n in names:
-            arr[n] = rec[n]
-        width = len(rec) // height
-        rows = arr.view(np.uint8).reshape(height, width * step)
-        rows = np.hstack([rows, np.full((height, row_pad), 0xAB, np.uint8)])
-        fields = [PF(name=n, offset=offsets[n], datatype=codes[rec.dtype[n].str[1:]], count=1)
-                  for n in names]
+        rows, width, specs = cloud_bytes(rec, offsets, step, bigendian, height, row_pad)
+        fields = [PF(name=n, offset=o, datatype=d, count=1) for n, o, d in specs]
         return self.t["sensor_msgs/msg/PointCloud2"](
             header=self.header(ns, "lidar"), height=height, width=width, fields=fields,
             is_bigendian=bigendian, point_step=step, row_step=width * step + row_pad,
@@ -279,20 +288,8 @@ class TestClouds:
     rec["ring"] = rng.integers(0, 64, 7)
 
     def _msg(self, rec, offsets, step, bigendian=False, height=1, row_pad=0):
-        codes = {"u2": 4, "f4": 7, "f8": 8, "u1": 2, "i4": 5}
-        order = ">" if bigendian else "<"
-        names = list(rec.dtype.names)
-        stored = np.dtype({"names": names, "offsets": [offsets[n] for n in names],
-                           "formats": [rec.dtype[n].newbyteorder(order) for n in names],
-                           "itemsize": step})
-        arr = np.zeros(len(rec), stored)
-        for n in names:
-            arr[n] = rec[n]
-        w = len(rec) // height
-        rows = np.hstack([arr.view(np.uint8).reshape(height, w * step),
-                          np.full((height, row_pad), 0xCD, np.uint8)])
-        fields = [Ns(name=n, offset=offsets[n], datatype=codes[rec.dtype[n].str[1:]], count=1)
-                  for n in names]
+        rows, w, specs = cloud_bytes(rec, offsets, step, bigendian, height, row_pad)
+        fields = [Ns(name=n, offset=o, datatype=d, count=1) for n, o, d in specs]
         return Ns(height=height, width=w, fields=fields, is_bigendian=bigendian, point_step=step,
                   row_step=w * step + row_pad, data=rows.tobytes())
 
