@@ -58,6 +58,7 @@ class TestEvaluators:
             np.testing.assert_array_equal(np.concatenate([o[k] for o in one]), whole[k])
         perm = balanced_order(n, 2)
         assert sorted(perm) == list(range(len(n)))
+        assert balanced_order(n, 1) is None and balanced_order(np.full(40, 7), 2) is None
         halves = [n[perm[:20]].sum(), n[perm[20:]].sum()]
         assert abs(halves[0] - halves[1]) <= n.max()   # in the caller's order: far apart
         assert abs(n[:20].sum() - n[20:].sum()) > n.max()

@@ -326,21 +326,24 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
         # work: one candidate on 5 frames took 1 ms on one thread, 8-20 ms on two.
         numba.set_num_threads(1)
     perm = balanced_order(n, numba.get_num_threads())
+    if perm is not None:
+        R, n = R[perm], n[perm]
     try:
-        _sums_numba(R[perm], scene.cam_params, n[perm], scene.x, scene.y, scene.z,
+        _sums_numba(R, scene.cam_params, n, scene.x, scene.y, scene.z,
                     scene.weight, scene.group, scene.point_start, scene.dtq, scene.dt_start,
                     scene.width, scene.height, scene.has_mask,
                     scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN)
     finally:
         numba.set_num_threads(threads)
-    # Each candidate's sums do not depend on the order: put them back in the caller's.
-    S1[perm], S2[perm], NIN[perm] = S1.copy(), S2.copy(), NIN.copy()
+    if perm is not None:
+        # Each candidate's sums do not depend on the order: put them back in the caller's.
+        S1[perm], S2[perm], NIN[perm] = S1.copy(), S2.copy(), NIN.copy()
     S1 *= q
     S2 *= q * q
     return S1, S2, NIN
 
 
-def balanced_order(n: np.ndarray, threads: int) -> np.ndarray:
+def balanced_order(n: np.ndarray, threads: int) -> np.ndarray | None:
     """An order of the candidates (C,) in which the contiguous blocks a static parallel loop
     gives each of ``threads`` threads carry about the same number of points.
 
@@ -348,10 +351,11 @@ def balanced_order(n: np.ndarray, threads: int) -> np.ndarray:
     caller's order one thread got the small ``n`` and the other the large (129 M points/s on
     two cores for 400 candidates of sorted ``n`` on 20 KITTI frames, 186 M dealt out like
     this). Sorting by ``n`` and dealing every ``threads``-th candidate to one block balances
-    them; the sums are the same in any order.
+    them; the sums are the same in any order. None when the caller's order is as good (one
+    thread, fewer than two candidates per thread, or every candidate at the same ``n``).
     """
-    if threads <= 1 or len(n) < 2 * threads:
-        return np.arange(len(n))
+    if threads <= 1 or len(n) < 2 * threads or n.min() == n.max():
+        return None
     order = np.argsort(n, kind="stable")
     return np.concatenate([order[t::threads] for t in range(threads)])
 
