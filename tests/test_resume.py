@@ -261,6 +261,54 @@ def test_interrupted_after_the_search_resumes_to_the_uninterrupted_result(
     assert not (run / "partial_front.csv").exists() and not (run / "checkpoint.npz").exists()
 
 
+@pytest.mark.parametrize("module, name, words", [
+    ("pipeline", "sweep_rings", "recovering the LiDAR rings"),
+    ("pipeline", "coarse_seeds", "scoring the seed grid"),
+], ids=["rings", "seed grid"])
+def test_an_interrupt_swallowed_by_library_code_still_stops_the_run(
+        tmp_path, raw_date, capsys, monkeypatch, module, name, words):
+    """The first signal's KeyboardInterrupt caught by code the run calls (matplotlib's guarded
+    optional import does so, found by a SIGINT 1.05 s into a run that then exited 0): the run
+    still stops, at the end of the phase at the latest, with exit 130 and one line."""
+    import importlib
+    import signal
+
+    from paretocal.cli import _STOP
+
+    mod = importlib.import_module(f"paretocal.{module}")
+    real = getattr(mod, name)
+
+    def swallowing(*args, **kwargs):
+        try:
+            _STOP(signal.SIGINT, None)             # what a Ctrl-C here does
+        except KeyboardInterrupt:
+            pass                                   # ... and library code that eats it
+        return real(*args, **kwargs)
+    monkeypatch.setattr(mod, name, swallowing)
+    run = tmp_path / "run"
+    assert main(["calibrate", str(raw_date), "--out", str(run)] + PHASE_CLI) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("paretocal: interrupted while"), err
+    assert f"while {words};" in err[0], err
+    assert not (run / "result.json").exists()
+
+
+def test_a_stop_raised_in_a_callback_from_c_prints_nothing():
+    """A SIGINT landing in a callback from C (numba's compiler cache notifies through ctypes)
+    cannot propagate; Python would print it with a traceback. The command line's hook keeps
+    quiet about it (the stop is taken at the next phase) and passes anything else on."""
+    import types
+
+    from paretocal.cli import _quiet_stops
+
+    seen = []
+    hook = _quiet_stops(seen.append)
+    for exc in (KeyboardInterrupt, ValueError):
+        hook(types.SimpleNamespace(exc_type=exc, exc_value=exc(), exc_traceback=None,
+                                   err_msg=None, object=None))
+    assert [u.exc_type for u in seen] == [ValueError]
+
+
 @pytest.mark.parametrize("delay", [0.4, 1.5, 3.0])
 def test_ctrl_c_at_any_time_prints_one_line_and_no_traceback(tmp_path, raw_date, delay):
     """SIGINT to a real CLI process while it imports, loads, extracts features or searches,

@@ -92,6 +92,21 @@ class TestNSGA2:
         assert np.all(a.X[:, 6] == np.round(a.X[:, 6]))          # n is an integer
         assert a.X[:, 6].max() > 5 * a.X[:, 6].min()              # the front spans n
 
+    def test_a_stop_request_ends_the_search_at_the_next_generation(self):
+        """A stop whose KeyboardInterrupt was swallowed by the code that received it is taken
+        before the next generation: the search raises SearchInterrupted with the last whole
+        generation, and the request is cleared."""
+        from paretocal.errors import STOP
+        from paretocal.search.checkpoint import SearchInterrupted
+
+        def progress(gen, total, best):
+            if gen == 4:
+                STOP.requested = True
+        s = SearchSettings(pop=20, gens=15, seed=7, bound_t_m=3, bound_r_deg=3)
+        with pytest.raises(SearchInterrupted) as info:
+            run_nsga2(self.Toy(), s, 10, 1000, progress=progress)
+        assert info.value.generation == 4 and not STOP.requested
+
 
 class TestEngines:
     """The package's array engine and pymoo's algorithm object (benchmarks/pymoo_nsga.py) run

@@ -17,7 +17,7 @@ from typing import Annotated, Optional
 import click
 import typer
 
-from .errors import ParetocalError, SettingsError
+from .errors import STOP, ParetocalError, SettingsError
 
 # Options shared by several commands, declared once.
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
@@ -772,7 +772,9 @@ _INTERRUPTED = {
 
 class _Stop:
     """SIGINT and SIGTERM handler: the first signal raises KeyboardInterrupt (the run stops and
-    saves what it has); later ones only say so, so that saving is not cut short."""
+    saves what it has) and records the request (``errors.STOP``: should library code swallow
+    the exception, the run stops at its next phase or generation); later signals only say so,
+    so that saving is not cut short."""
 
     def __init__(self):
         self.signals = 0
@@ -781,6 +783,7 @@ class _Stop:
     def __call__(self, signum, frame):
         self.signals += 1
         if self.signals == 1:
+            STOP.requested = True
             raise KeyboardInterrupt
         import os
 
@@ -813,13 +816,14 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     verbose = "--verbose" in args or "-v" in args
     name = next((a for a in args if not a.startswith("-")), None)
-    _STOP.signals, _STOP.reported = 0, False
+    _STOP.signals, _STOP.reported, STOP.requested = 0, False, False
     # SIGTERM stops a run the way Ctrl-C does: checkpoint kept, partial front written.
     main_thread = threading.current_thread() is threading.main_thread()
     # A signal ignored when the process started (a background job of a shell, nohup) stays
     # ignored, as Python itself does for SIGINT.
     previous = ({sig: signal.signal(sig, _STOP) for sig in (signal.SIGINT, signal.SIGTERM)
                  if signal.getsignal(sig) is not signal.SIG_IGN} if main_thread else {})
+    unraisable, sys.unraisablehook = sys.unraisablehook, _quiet_stops(sys.unraisablehook)
     try:
         command = typer.main.get_command(app)
         rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
@@ -847,8 +851,22 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
               "(rerun with --verbose for the traceback)", file=sys.stderr)
         return 1
     finally:
+        sys.unraisablehook = unraisable
         for sig, handler in previous.items():
             signal.signal(sig, signal.SIG_IGN if final else handler)
+
+
+def _quiet_stops(hook):
+    """``sys.unraisablehook`` that stays silent about the stop signal's KeyboardInterrupt.
+
+    Raised while Python runs a callback from C (numba's compiler cache is one), the exception
+    cannot propagate and would be printed with a traceback; the stop itself is not lost
+    (``errors.STOP``: the run stops at its next phase or generation)."""
+    def quiet(unraisable):
+        if not (isinstance(unraisable.exc_type, type)
+                and issubclass(unraisable.exc_type, KeyboardInterrupt)):
+            hook(unraisable)
+    return quiet
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -47,3 +47,27 @@ class Interrupted(Exception):
         super().__init__(f"interrupted while {phase}")
         self.phase, self.generation = phase, generation
         self.X, self.F, self.checkpoint = X, F, checkpoint
+
+
+class StopRequest:
+    """Whether the user asked the run to stop (SIGINT or SIGTERM), kept beside the
+    ``KeyboardInterrupt`` the command line's handler raises.
+
+    Library code may swallow that exception (a third-party module's guarded optional import
+    turns it into a caught error and a warning), which would let a stopped run go on to the
+    end. The run's phases and generations call :meth:`check`, so a stop is never lost: at the
+    latest it takes effect at the next phase or generation.
+    """
+
+    def __init__(self):
+        self.requested = False
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` when a stop was requested and not yet taken."""
+        if self.requested:
+            self.requested = False
+            raise KeyboardInterrupt
+
+
+#: The process's stop request: set by the command line's signal handler, cleared when taken.
+STOP = StopRequest()

@@ -15,7 +15,7 @@ import numpy as np
 
 from .config import Settings, check_population_memory
 from .decide import decide, reprojection_deviation
-from .errors import InputError, Interrupted, SettingsError
+from .errors import STOP, InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
 from .geometry import pose_error
 from .io.frame import Frame
@@ -153,8 +153,11 @@ def _timed(timings: dict[str, float], name: str):
     becomes :class:`~paretocal.errors.Interrupted` naming the phase."""
     t0 = time.perf_counter()
     try:
+        STOP.check()
         yield
+        STOP.check()
     except KeyboardInterrupt:
+        STOP.requested = False                    # taken
         raise Interrupted(PHASES[name]) from None
     finally:
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0

@@ -16,6 +16,7 @@ import numpy as np
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
 from ..config import SearchSettings
+from ..errors import STOP
 from .checkpoint import Checkpoint, SearchInterrupted
 from .lean import LeanNSGA2
 from .problem import bounds, place_seeds, round_n
@@ -133,11 +134,13 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
         while state.generation < settings.gens:
             # step() leaves its argument untouched, so an interrupt inside it leaves the last
             # whole generation in `state` to save.
+            STOP.check()
             state = engine.step(state)
             record(state.generation, state.F)
             if checkpoint is not None and state.generation % checkpoint.every == 0:
                 checkpoint.save(state, history)
     except KeyboardInterrupt:
+        STOP.requested = False                    # taken
         if checkpoint is not None:
             checkpoint.save(state, history)
         Xf, Ff = front_of(state.X, state.F)
