@@ -40,6 +40,23 @@ class TestEvaluators:
         for u, v in zip(a, b):
             np.testing.assert_allclose(u, v, rtol=1e-9, atol=1e-6)
 
+    def test_the_grouped_layout_holds_the_first_n_points_of_each_group(self, scene_and_feats,
+                                                                        rng):
+        """The kernel reads points grouped (Scene.gx ...): for every n, the first
+        ``group_count[f, n, g]`` grouped points of group g are the group-g points among the
+        first n of the frame, in the same order (so the sums are the same, bit for bit)."""
+        scene = scene_and_feats[0]
+        for f in range(scene.n_frames):
+            a, b = scene.point_start[f], scene.point_start[f + 1]
+            for n in [0, 1, *rng.integers(2, b - a, 5), b - a]:
+                for g in range(scene.group_start.shape[1]):
+                    first = a + np.flatnonzero(scene.group[a:a + n] == g)
+                    s = scene.group_start[f, g]
+                    got = slice(s, s + scene.group_count[f, n, g])
+                    for grouped, flat in ((scene.gx, scene.x), (scene.gy, scene.y),
+                                          (scene.gz, scene.z), (scene.gweight, scene.weight)):
+                        np.testing.assert_array_equal(grouped[got], flat[first])
+
     def test_the_order_of_the_candidates_changes_no_sum(self, scene_and_feats, rng):
         """The kernel deals candidates to threads by n (balanced_order); every candidate's
         sums stay bitwise what they are alone, whatever the order or the thread count."""

@@ -9,9 +9,10 @@ outside the image, or touching a masked pixel) costs ``outside[f]``. The evaluat
 per-group weighted sums of the cost and of its square, shape (C, F, G), from which the objective
 takes means and sampling errors.
 
-Three implementations give the same sums: a fused numba kernel (parallel over candidates, one
-pass over the points, no temporaries), a numpy fallback batched over candidates, and a KD-tree
-oracle that measures exact distances to the edge pixels.
+Three implementations give the same sums: a fused numba kernel (parallel over candidates; each
+block of 256 points is projected by one branch-free, vectorised loop into per-thread scratch and
+then looked up and summed in point order), a numpy fallback batched over candidates, and a
+KD-tree oracle that measures exact distances to the edge pixels.
 """
 
 from __future__ import annotations
@@ -35,103 +36,56 @@ except Exception:  # pragma: no cover - exercised only where numba is broken
 SERIAL_BELOW = 4  # batches of fewer candidates run on one thread (see sums_numba)
 
 
+#: Points a kernel pass projects at once: the projection of a block runs as one branch-free,
+#: vectorised loop into per-thread scratch, then a second loop looks the block up and sums.
+BLOCK = 256
+
 if HAVE_NUMBA:
+    # error_model="numpy": a division by zero gives inf instead of raising, so numba emits no
+    # check per division and LLVM vectorises the projection (2.5x faster on its own).
 
-    @njit(cache=True, fastmath=False, inline="always")
-    def _bilinear(dtq, base, w, h, u, v):  # pragma: no cover - compiled
-        """Bilinear DT value (DT units) at an in-image (u, v)."""
+    @njit(cache=True, error_model="numpy", inline="always")
+    def _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
+        """Store the bilinear footprint of (u, v) as entry j of the scratch: the flat index of
+        its top-left pixel in the frame, the fractions, and ``ok`` (points not ok read pixel 0,
+        harmlessly, so the loop has no branch)."""
+        u = u if ok else 0.0
+        v = v if ok else 0.0
         x0 = min(int(u), w - 2)
         y0 = min(int(v), h - 2)
-        fx = u - x0
-        fy = v - y0
-        k = base + y0 * w + x0
-        d00 = np.float64(dtq[k])
-        d01 = np.float64(dtq[k + 1])
-        d10 = np.float64(dtq[k + w])
-        d11 = np.float64(dtq[k + w + 1])
-        top = d00 + fx * (d01 - d00)
-        bot = d10 + fx * (d11 - d10)
-        return top + fy * (bot - top)
+        FXB[j] = u - x0
+        FYB[j] = v - y0
+        KB[j] = y0 * w + x0
+        OKB[j] = ok
 
-    @njit(cache=True, fastmath=False, inline="always")
-    def _bilinear_masked(dtq, base, w, h, u, v, out):  # pragma: no cover - compiled
-        """:func:`_bilinear` and 1, or ``(out, 0)`` when one of the four pixels read is masked
-        (holds DT_MASKED): the point then counts as outside the image. Branch-free: where a
-        mask's border crosses the view, a branch on it was mispredicted often (a masked
-        frame ran at 0.80x the unmasked rate with it, 0.89x without)."""
-        x0 = min(int(u), w - 2)
-        y0 = min(int(v), h - 2)
-        k = base + y0 * w + x0
-        q00 = dtq[k]
-        q01 = dtq[k + 1]
-        q10 = dtq[k + w]
-        q11 = dtq[k + w + 1]
-        fx = u - x0
-        fy = v - y0
-        d00 = np.float64(q00)
-        d10 = np.float64(q10)
-        top = d00 + fx * (np.float64(q01) - d00)
-        bot = d10 + fx * (np.float64(q11) - d10)
-        d = top + fy * (bot - top)
-        good = max(max(q00, q01), max(q10, q11)) != DT_MASKED
-        return (d if good else out), np.int64(good)
-
-    @njit(cache=True, fastmath=False)
-    def _pinhole_loop(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22, r23, x, y, z,
-                      weight, group, i0, i1, dtq, base, w, h, out, masked,
-                      z_min):  # pragma: no cover - compiled
-        """Points i0..i1 of one frame for one candidate through an ideal pinhole: the rows
-        ``a0*``, ``a1*`` of ``K @ T[:3]`` and the depth row ``r2*`` of ``T``. Returns the
-        per-group sums of the cost and of its square and the count of points in view."""
+    @njit(cache=True, error_model="numpy")
+    def _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22, r23, x, y, z,
+                       w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
+        """Project the points (x, y, z) (m,) through an ideal pinhole into the scratch: the rows
+        ``a0*``, ``a1*`` of ``K @ T[:3]`` and the depth row ``r2*`` of ``T``. One division
+        per point, no branch: the loop vectorises."""
         umax = w - 1.0
         vmax = h - 1.0
-        s10 = 0.0
-        s11 = 0.0
-        s12 = 0.0
-        s20 = 0.0
-        s21 = 0.0
-        s22 = 0.0
-        inside = 0
-        for i in range(i0, i1):
-            X = x[i]
-            Y = y[i]
-            Z = z[i]
+        for j in range(x.shape[0]):
+            X = np.float64(x[j])
+            Y = np.float64(y[j])
+            Z = np.float64(z[j])
             zc = r20 * X + r21 * Y + r22 * Z + r23
-            d = out
-            if zc > z_min:
-                iz = 1.0 / zc
-                u = (a00 * X + a01 * Y + a02 * Z + a03) * iz
-                v = (a10 * X + a11 * Y + a12 * Z + a13) * iz
-                if u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax:
-                    # Two copies rather than one checked lookup: the check, even skipped,
-                    # cost 8-17 % of this loop.
-                    if masked:
-                        d, hit = _bilinear_masked(dtq, base, w, h, u, v, out)
-                        inside += hit
-                    else:
-                        d = _bilinear(dtq, base, w, h, u, v)
-                        inside += 1
-            wd = weight[i] * d
-            g = group[i]
-            if g == 0:
-                s10 += wd
-                s20 += wd * d
-            elif g == 1:
-                s11 += wd
-                s21 += wd * d
-            else:
-                s12 += wd
-                s22 += wd * d
-        return s10, s11, s12, s20, s21, s22, inside
+            iz = 1.0 / zc
+            u = (a00 * X + a01 * Y + a02 * Z + a03) * iz
+            v = (a10 * X + a11 * Y + a12 * Z + a13) * iz
+            ok = (zc > z_min) & (u >= 0.0) & (u <= umax) & (v >= 0.0) & (v <= vmax)
+            _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
 
-    @njit(cache=True, fastmath=False)
-    def _lens_loop(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y, z,
-                   weight, group, i0, i1, dtq, base, w, h, out, masked,
-                   z_min):  # pragma: no cover - compiled
-        """:func:`_pinhole_loop` through a distorted pinhole, a fisheye or a Mei camera
-        (``cam``: the frame's :meth:`Camera.kernel_params` row; ``r**``: ``T[:3]``), with the
-        arithmetic of :meth:`Camera.project_camera_points`."""
-        kind = int(cam[P_MODEL])
+    @njit(cache=True, error_model="numpy")
+    def _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y, z,
+                      w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
+        """:func:`_pinhole_block` through a distorted pinhole or a Mei camera (``cam``: the
+        frame's :meth:`Camera.kernel_params` row; ``r**``: ``T[:3]``), with the arithmetic of
+        :meth:`Camera.project_camera_points`. Branch-free, so that it vectorises: every term
+        is computed for every point (zero coefficients add exact zeros; a point not valid for
+        the model is dropped by ``ok`` whatever its arithmetic gave)."""
+        mei = int(cam[P_MODEL]) == MEI
         fx_, fy_, cx_, cy_, sk = cam[P_FX], cam[P_FY], cam[P_CX], cam[P_CY], cam[P_SKEW]
         xi = cam[P_XI]
         k1, k2, k3 = cam[P_K1], cam[P_K1 + 1], cam[P_K1 + 2]
@@ -140,143 +94,169 @@ if HAVE_NUMBA:
         s1, s2, s3, s4 = cam[P_S1], cam[P_S1 + 1], cam[P_S1 + 2], cam[P_S1 + 3]
         lim = cam[P_LIMIT]
         zs_min = cam[P_ZS_MIN]
-        rational = k4 != 0.0 or k5 != 0.0 or k6 != 0.0
-        tangential = p1 != 0.0 or p2 != 0.0 or s1 != 0.0 or s2 != 0.0 or s3 != 0.0 or s4 != 0.0
         z_min2 = z_min * z_min
         umax = w - 1.0
         vmax = h - 1.0
-        s10 = 0.0
-        s11 = 0.0
-        s12 = 0.0
-        s20 = 0.0
-        s21 = 0.0
-        s22 = 0.0
-        inside = 0
-        for i in range(i0, i1):
-            X = x[i]
-            Y = y[i]
-            Z = z[i]
+        for j in range(x.shape[0]):
+            X = np.float64(x[j])
+            Y = np.float64(y[j])
+            Z = np.float64(z[j])
             xc = r00 * X + r01 * Y + r02 * Z + r03
             yc = r10 * X + r11 * Y + r12 * Z + r13
             zc = r20 * X + r21 * Y + r22 * Z + r23
-            d = out
+            n2 = xc * xc + yc * yc + zc * zc
+            norm = np.sqrt(n2)
+            ok = ((n2 > z_min2) & (zc > zs_min * norm)) if mei else zc > z_min
+            den = zc + xi * norm if mei else zc
+            iden = 1.0 / den
+            xn = xc * iden
+            yn = yc * iden
+            r2 = xn * xn + yn * yn
+            rad = ((1.0 + r2 * (k1 + r2 * (k2 + r2 * k3)))
+                   / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))))
+            r4 = r2 * r2
+            xy = xn * yn
+            xd = xn * rad + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn) + s1 * r2 + s2 * r4
+            yd = yn * rad + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy + s3 * r2 + s4 * r4
+            u = fx_ * xd + sk * yd + cx_
+            v = fy_ * yd + cy_
+            ok = ok & (r2 < lim) & (u >= 0.0) & (u <= umax) & (v >= 0.0) & (v <= vmax)
+            _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
+
+    @njit(cache=True, error_model="numpy")
+    def _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y,
+                       z, w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
+        """:func:`_pinhole_block` through an equidistant fisheye (arctan2 per point: scalar)."""
+        fx_, fy_, cx_, cy_, sk = cam[P_FX], cam[P_FY], cam[P_CX], cam[P_CY], cam[P_SKEW]
+        k1, k2, k3, k4 = cam[P_K1], cam[P_K1 + 1], cam[P_K1 + 2], cam[P_K1 + 3]
+        lim = cam[P_LIMIT]
+        z_min2 = z_min * z_min
+        umax = w - 1.0
+        vmax = h - 1.0
+        for j in range(x.shape[0]):
+            X = np.float64(x[j])
+            Y = np.float64(y[j])
+            Z = np.float64(z[j])
+            xc = r00 * X + r01 * Y + r02 * Z + r03
+            yc = r10 * X + r11 * Y + r12 * Z + r13
+            zc = r20 * X + r21 * Y + r22 * Z + r23
             ok = False
             xd = 0.0
             yd = 0.0
-            # Branches on kind, rational and tangential take the same way for every point.
-            if kind == FISHEYE:
-                rho2 = xc * xc + yc * yc
-                if rho2 + zc * zc > z_min2:
-                    rho = np.sqrt(rho2)
-                    theta = np.arctan2(rho, zc)
-                    if theta < lim:
-                        t2 = theta * theta
-                        td = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-                        sc = td / rho if rho > 0.0 else 0.0
-                        xd = sc * xc
-                        yd = sc * yc
-                        ok = True
-            else:
-                den = zc
-                if kind == MEI:
-                    n2 = xc * xc + yc * yc + zc * zc
-                    if n2 > z_min2:
-                        norm = np.sqrt(n2)
-                        ok = zc > zs_min * norm
-                        den = zc + xi * norm
-                else:
-                    ok = zc > z_min
-                if ok:
-                    iden = 1.0 / den
-                    xn = xc * iden
-                    yn = yc * iden
-                    r2 = xn * xn + yn * yn
-                    if r2 < lim:
-                        rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                        if rational:
-                            rad /= 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-                        if tangential:
-                            r4 = r2 * r2
-                            xy = xn * yn
-                            xd = (xn * rad + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn)
-                                  + s1 * r2 + s2 * r4)
-                            yd = (yn * rad + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy
-                                  + s3 * r2 + s4 * r4)
-                        else:
-                            xd = xn * rad
-                            yd = yn * rad
-                    else:
-                        ok = False
-            if ok:
-                u = fx_ * xd + sk * yd + cx_
-                v = fy_ * yd + cy_
-                if u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax:
-                    if masked:
-                        d, hit = _bilinear_masked(dtq, base, w, h, u, v, out)
-                        inside += hit
-                    else:
-                        d = _bilinear(dtq, base, w, h, u, v)
-                        inside += 1
-            wd = weight[i] * d
-            g = group[i]
-            if g == 0:
-                s10 += wd
-                s20 += wd * d
-            elif g == 1:
-                s11 += wd
-                s21 += wd * d
-            else:
-                s12 += wd
-                s22 += wd * d
-        return s10, s11, s12, s20, s21, s22, inside
+            rho2 = xc * xc + yc * yc
+            if rho2 + zc * zc > z_min2:
+                rho = np.sqrt(rho2)
+                theta = np.arctan2(rho, zc)
+                if theta < lim:
+                    t2 = theta * theta
+                    td = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+                    sc = td / rho if rho > 0.0 else 0.0
+                    xd = sc * xc
+                    yd = sc * yc
+                    ok = True
+            u = fx_ * xd + sk * yd + cx_
+            v = fy_ * yd + cy_
+            ok = ok and u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax
+            _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
 
-    @njit(parallel=True, cache=True, fastmath=False)
-    def _sums_numba(R, cam, n, x, y, z, weight, group, point_start, dtq, dt_start, width,
-                    height, has_mask, outside_q, z_min, S1, S2,
-                    NIN):  # pragma: no cover - compiled
+    @njit(cache=True, error_model="numpy")
+    def _lookup_sum(dtq, base, w, KB, FXB, FYB, OKB, weight, out, masked, s1, s2,
+                    inside):  # pragma: no cover - compiled
+        """Add the block's bilinear DT values (DT units; ``out`` for points not ok or, when
+        ``masked``, touching a masked pixel) times ``weight`` (m,) to ``s1``, their squares to
+        ``s2``, in point order; count the points on usable pixels in ``inside``."""
+        for j in range(weight.shape[0]):
+            d = out
+            if OKB[j]:
+                k = base + KB[j]
+                q00 = dtq[k]
+                q01 = dtq[k + 1]
+                q10 = dtq[k + w]
+                q11 = dtq[k + w + 1]
+                fx = FXB[j]
+                fy = FYB[j]
+                d00 = np.float64(q00)
+                d10 = np.float64(q10)
+                top = d00 + fx * (np.float64(q01) - d00)
+                bot = d10 + fx * (np.float64(q11) - d10)
+                d = top + fy * (bot - top)
+                if masked:
+                    # Branch-free: where a mask's border crosses the view, a branch on it
+                    # was mispredicted often.
+                    good = max(max(q00, q01), max(q10, q11)) != DT_MASKED
+                    d = d if good else out
+                    inside += np.int64(good)
+                else:
+                    inside += 1
+            wd = weight[j] * d
+            s1 += wd
+            s2 += wd * d
+        return s1, s2, inside
+
+    @njit(parallel=True, cache=True, error_model="numpy")
+    def _sums_numba(R, cam, n, x, y, z, weight, group_start, group_count, point_start, dtq,
+                    dt_start, width, height, has_mask, outside_q, z_min, S1, S2, NIN, KS, FS,
+                    OS):  # pragma: no cover - compiled
         # Frame-outer loop: all candidates read one frame's DT while it is hot in cache. The DT
         # is stored as uint16 (0.00015 px steps at a 10 px truncation): half the bytes of
         # float32, so a 1242 x 375 frame fits a 1 MB L2 cache; bilinear lookups were 55 % of
         # the time with float32. Costs are accumulated in DT units and scaled by the caller.
-        # The camera model is chosen once per frame and candidate: the ideal pinhole keeps its
-        # own loop (K folded into the extrinsic, one division per point: as fast as before
-        # lens models existed), the other models share one loop.
+        # Points are grouped (Scene.gx ...): each group's sums take one run of points, no
+        # per-point branch on the group. The camera model is chosen once per frame: the ideal
+        # pinhole has K folded into the extrinsic (one division per point, vectorised).
         C = R.shape[0]
         F = point_start.shape[0] - 1
+        G = group_start.shape[1]
         for f in range(F):
             w = width[f]
             h = height[f]
             base = dt_start[f]
             out = outside_q[f]
-            p0 = point_start[f]
-            mf = point_start[f + 1] - p0
+            mf = point_start[f + 1] - point_start[f]
             masked = has_mask[f]
             row = cam[f]
-            ideal = int(row[P_MODEL]) == PINHOLE_IDEAL
+            kind = int(row[P_MODEL])
             fx_, fy_, cx_, cy_, sk = row[P_FX], row[P_FY], row[P_CX], row[P_CY], row[P_SKEW]
             for c in prange(C):
+                t = numba.get_thread_id()
+                KB, FXB, FYB, OKB = KS[t], FS[t, 0], FS[t, 1], OS[t]
                 r00, r01, r02, r03 = R[c, 0, 0], R[c, 0, 1], R[c, 0, 2], R[c, 0, 3]
                 r10, r11, r12, r13 = R[c, 1, 0], R[c, 1, 1], R[c, 1, 2], R[c, 1, 3]
                 r20, r21, r22, r23 = R[c, 2, 0], R[c, 2, 1], R[c, 2, 2], R[c, 2, 3]
-                i1 = p0 + min(n[c], mf)
-                if ideal:
-                    # The first two rows of K @ T[:3].
-                    s10, s11, s12, s20, s21, s22, inside = _pinhole_loop(
-                        fx_ * r00 + sk * r10 + cx_ * r20, fx_ * r01 + sk * r11 + cx_ * r21,
-                        fx_ * r02 + sk * r12 + cx_ * r22, fx_ * r03 + sk * r13 + cx_ * r23,
-                        fy_ * r10 + cy_ * r20, fy_ * r11 + cy_ * r21, fy_ * r12 + cy_ * r22,
-                        fy_ * r13 + cy_ * r23, r20, r21, r22, r23, x, y, z, weight, group,
-                        p0, i1, dtq, base, w, h, out, masked, z_min)
-                else:
-                    s10, s11, s12, s20, s21, s22, inside = _lens_loop(
-                        r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, row,
-                        x, y, z, weight, group, p0, i1, dtq, base, w, h, out, masked, z_min)
-                S1[c, f, 0] = s10
-                S1[c, f, 1] = s11
-                S1[c, f, 2] = s12
-                S2[c, f, 0] = s20
-                S2[c, f, 1] = s21
-                S2[c, f, 2] = s22
+                # The first two rows of K @ T[:3].
+                a00 = fx_ * r00 + sk * r10 + cx_ * r20
+                a01 = fx_ * r01 + sk * r11 + cx_ * r21
+                a02 = fx_ * r02 + sk * r12 + cx_ * r22
+                a03 = fx_ * r03 + sk * r13 + cx_ * r23
+                a10 = fy_ * r10 + cy_ * r20
+                a11 = fy_ * r11 + cy_ * r21
+                a12 = fy_ * r12 + cy_ * r22
+                a13 = fy_ * r13 + cy_ * r23
+                m = min(n[c], mf)
+                inside = 0
+                for g in range(G):
+                    a = group_start[f, g]
+                    e = a + group_count[f, m, g]
+                    s1 = 0.0
+                    s2 = 0.0
+                    for b in range(a, e, BLOCK):
+                        bb = min(b + BLOCK, e)
+                        if kind == PINHOLE_IDEAL:
+                            _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21,
+                                           r22, r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min,
+                                           KB, FXB, FYB, OKB)
+                        elif kind == FISHEYE:
+                            _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
+                                           r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
+                                           z_min, KB, FXB, FYB, OKB)
+                        else:
+                            _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
+                                          r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
+                                          z_min, KB, FXB, FYB, OKB)
+                        s1, s2, inside = _lookup_sum(dtq, base, w, KB, FXB, FYB, OKB,
+                                                     weight[b:bb], out, masked, s1, s2, inside)
+                    S1[c, f, g] = s1
+                    S2[c, f, g] = s2
                 NIN[c, f] = inside
 
 
@@ -328,11 +308,15 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     perm = balanced_order(n, numba.get_num_threads())
     if perm is not None:
         R, n = R[perm], n[perm]
+    # Per-thread scratch for a block's footprints (indexed by numba's thread id).
+    T_ = numba.config.NUMBA_NUM_THREADS
     try:
-        _sums_numba(R, scene.cam_params, n, scene.x, scene.y, scene.z,
-                    scene.weight, scene.group, scene.point_start, scene.dtq, scene.dt_start,
-                    scene.width, scene.height, scene.has_mask,
-                    scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN)
+        _sums_numba(R, scene.cam_params, n, scene.gx, scene.gy, scene.gz, scene.gweight,
+                    scene.group_start, scene.group_count, scene.point_start, scene.dtq,
+                    scene.dt_start, scene.width, scene.height, scene.has_mask,
+                    scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN,
+                    np.empty((T_, BLOCK), np.int64), np.empty((T_, 2, BLOCK)),
+                    np.empty((T_, BLOCK), np.bool_))
     finally:
         numba.set_num_threads(threads)
     if perm is not None:

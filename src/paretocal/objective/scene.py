@@ -55,6 +55,16 @@ class Scene:
     group_prefix : ndarray, shape (F, max_points + 1, G, 2), float64
         ``group_prefix[f, k, g]`` = sum of the weights and of the squared weights of group g
         among the first k points of frame f (both equal the count when weights are 1).
+    gx, gy, gz, gweight : ndarray, shape (M,), float32
+        The same points and weights grouped: within each frame, group 0's points, then group
+        1's, ..., each group in evaluation order. The kernel sums one group at a time, so the
+        first ``n`` points of a frame are the first ``group_count[f, n, g]`` points of each
+        group (the same points, summed in the same order: the same sums bit for bit), and no
+        per-point branch picks the sum a point goes to.
+    group_start : ndarray, shape (F, G), int64
+        Where group g of frame f starts in the grouped arrays.
+    group_count : ndarray, shape (F, max_points + 1, G), int32
+        ``group_count[f, k, g]`` = points of group g among the first k points of frame f.
     z_min : float
     truncation_px : float
     names : list of str
@@ -80,6 +90,12 @@ class Scene:
     cameras: list
     cam_params: np.ndarray
     has_mask: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    gz: np.ndarray
+    gweight: np.ndarray
+    group_start: np.ndarray
+    group_count: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -170,11 +186,10 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
         prefix[i, 1:len(f.xyz) + 1, :, 0] = np.cumsum(onehot * w[:, None], axis=0)
         prefix[i, 1:len(f.xyz) + 1, :, 1] = np.cumsum(onehot * (w * w)[:, None], axis=0)
         prefix[i, len(f.xyz) + 1:] = prefix[i, len(f.xyz)]
+    x, y, z = (np.ascontiguousarray(xyz[:, k], dtype=np.float32) for k in range(3))
+    order, group_start, group_count = _grouped(group, point_start)
     return Scene(
-        x=np.ascontiguousarray(xyz[:, 0], dtype=np.float32),
-        y=np.ascontiguousarray(xyz[:, 1], dtype=np.float32),
-        z=np.ascontiguousarray(xyz[:, 2], dtype=np.float32),
-        weight=weight, group=group, point_start=point_start,
+        x=x, y=y, z=z, weight=weight, group=group, point_start=point_start,
         dtq=np.concatenate(dtq) if dtq else np.zeros(0, np.uint16),
         dt_scale=scale, dt_start=dt_start,
         width=np.array([f.image.dt.shape[1] for f in frames], dtype=np.int64),
@@ -184,7 +199,30 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
         names=[f.name for f in frames], cameras=cameras,
         has_mask=np.array([m is not None and not np.all(m) for m in masks], dtype=bool),
         cam_params=np.ascontiguousarray(np.stack([c.kernel_params() for c in cameras]))
-        if cameras else np.zeros((0, N_PARAMS)))
+        if cameras else np.zeros((0, N_PARAMS)),
+        gx=x[order], gy=y[order], gz=z[order], gweight=weight[order], group_start=group_start,
+        group_count=group_count)
+
+
+def _grouped(group: np.ndarray, point_start: np.ndarray):
+    """The grouped layout of :class:`Scene`: the order (M,) that groups each frame's points
+    (stable: evaluation order within a group), ``group_start`` (F, G) and ``group_count``
+    (F, max_points + 1, G)."""
+    F = len(point_start) - 1
+    counts = np.diff(point_start)
+    maxm = int(counts.max()) if F else 0
+    order = np.empty(len(group), dtype=np.int64)
+    start = np.zeros((F, N_GROUPS), dtype=np.int64)
+    count = np.zeros((F, maxm + 1, N_GROUPS), dtype=np.int32)
+    for f in range(F):
+        a, b = point_start[f], point_start[f + 1]
+        g = group[a:b].astype(np.int64)
+        order[a:b] = a + np.argsort(g, kind="stable")
+        sizes = np.bincount(g, minlength=N_GROUPS)
+        start[f] = a + np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        count[f, 1:b - a + 1] = np.cumsum(np.eye(N_GROUPS, dtype=np.int32)[g], axis=0)
+        count[f, b - a + 1:] = count[f, b - a]
+    return order, start, count
 
 
 def _mean_dt(image, mask) -> float:
