@@ -59,6 +59,31 @@ def test_no_restart_when_switched_off(stage):
     assert "restart" not in ev and set(ev) == {"contrast", "intervals"}
 
 
+def test_local_optima_polished_together_are_those_polished_alone(stage):
+    """The verdict and the basin test polish their poses in one batch: each optimum is the one
+    it reaches alone, bit for bit."""
+    from paretocal.quality import local_optimum
+
+    starts = np.array([_full(stage, np.zeros(6)), _full(stage, [0.05, 0, -0.03, 1.0, -0.5, 0])])
+    together = local_optimum(stage.objective, starts)
+    assert together.shape == (2, 7)
+    for x, y in zip(starts, together):
+        np.testing.assert_array_equal(local_optimum(stage.objective, x), y)
+
+
+def test_a_stage_reusing_the_image_features_is_the_same_stage(stage, raw_frames):
+    """Re-selecting the points builds a second stage with the first one's image features
+    (they do not depend on the pose): the same scene as extracting them again."""
+    frames = raw_frames[:6]
+    T = frames[0].T_ref @ np.diag([1.0, 1.0, 1.0, 1.0])
+    T[:3, 3] += [0.02, -0.01, 0.0]
+    fresh = Stage(frames, T, frames[0].T_ref, SETTINGS, cost=stage.cost)
+    reused = Stage(frames, T, frames[0].T_ref, SETTINGS, cost=stage.cost, images=stage.images)
+    assert all(a is b for a, b in zip(reused.images, stage.images))
+    for name in ("x", "y", "z", "weight", "group", "dtq", "point_start"):
+        np.testing.assert_array_equal(getattr(fresh.scene, name), getattr(reused.scene, name))
+
+
 def test_images_of_other_frames_do_not_agree_with_the_clouds(raw_frames):
     """Every cloud with the image taken 5 frames later (the car has moved some metres), or
     upside down: at the objective's local optimum the result is not clearly better than random

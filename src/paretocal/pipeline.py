@@ -239,7 +239,8 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
         with _timed(timings, "reselect"):
             T_est = stage.objective.transforms(X[np.argmin(F[:, 0])][None])[0]
             stage = Stage(frames, T_est, T_init, settings, rings=rings, cost=stage.cost,
-                          view="after re-selecting points at the estimate")
+                          view="after re-selecting points at the estimate",
+                          images=stage.images)
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective

@@ -39,9 +39,10 @@ def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float =
 
 
 def at_every_point(objective, x: np.ndarray) -> np.ndarray:
-    """A copy of the solution ``x`` (7,) with ``n`` set to every feature point of the frames."""
+    """A copy of the solution ``x`` (7,) (or solutions (k, 7)) with ``n`` set to every feature
+    point of the frames."""
     x = np.array(x, dtype=np.float64, copy=True)
-    x[6] = int(objective.scene.points_per_frame.max())
+    x[..., 6] = int(objective.scene.points_per_frame.max())
     return x
 
 
@@ -119,25 +120,30 @@ def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[flo
 
 
 def local_optimum(objective, x: np.ndarray, iters: int = 15):
-    """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,)."""
+    """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,).
+
+    ``x`` (k, 7): the k solutions are polished together (one objective call per step for all:
+    the same optima as one by one, in less time), returning (k, 7)."""
     from .search.polish import newton_polish, polish
 
     x = at_every_point(objective, x)
     fun = lambda Z: objective.chamfer(Z, ucb_k=0.0)["f1"]  # noqa: E731
-    Z, _, _ = newton_polish(fun, x[None], iters=iters)
+    Z, _, _ = newton_polish(fun, np.atleast_2d(x), iters=iters)
     Z, _, _ = polish(fun, Z, step=np.array([0.005] * 3 + [0.05] * 3))
-    return Z[0]
+    return Z[0] if x.ndim == 1 else Z
 
 
-def displacement_px(objective, x: np.ndarray, y: np.ndarray) -> float:
-    """Mean pixel distance between the feature points' projections under poses x and y."""
+def displacement_px(objective, x: np.ndarray, y: np.ndarray):
+    """Mean pixel distance between the feature points' projections under pose x (7,) and
+    pose y (7,) (a float), or each of poses y (k, 7) (an array (k,))."""
     from .decide import reprojection_deviation
 
     sc = objective.scene
-    T = objective.transforms(np.vstack([x, y]))
-    return float(reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in
-                                                      range(sc.n_frames)], sc.cameras,
-                                        sc.z_min)[0])
+    y = np.asarray(y, dtype=np.float64)
+    T = objective.transforms(np.vstack([x, np.atleast_2d(y)]))
+    d = reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in range(sc.n_frames)],
+                               sc.cameras, sc.z_min)
+    return float(d[0]) if y.ndim == 1 else d
 
 
 def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:

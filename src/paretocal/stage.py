@@ -35,17 +35,21 @@ DEFAULT_N_MIN = 20
 
 
 def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings,
-                     progress=None, rings: list[Rings] | None = None) -> list[FrameFeatures]:
+                     progress=None, rings: list[Rings] | None = None,
+                     images: list | None = None) -> list[FrameFeatures]:
     """Features of every frame, each with its own seeded stream (independent of frame count).
 
-    ``rings`` (from :func:`sweep_rings`) saves recovering each sweep's rings again.
+    ``rings`` (from :func:`sweep_rings`) saves recovering each sweep's rings again, ``images``
+    (the frames' ``FrameFeatures.image`` from an earlier stage with the same settings)
+    extracting the image features again.
     """
     seq = np.random.SeedSequence(settings.search.seed)
     out = []
     for k, (frame, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
         out.append(prepare_frame(frame, T_init, settings.features, settings.objective,
                                  np.random.default_rng(child),
-                                 rings=None if rings is None else rings[k]))
+                                 rings=None if rings is None else rings[k],
+                                 image=None if images is None else images[k]))
         if progress is not None:
             progress(k + 1, len(frames))
     return out
@@ -156,15 +160,20 @@ class Stage:
     not the initial extrinsic (the stage and its distance from ``T_init`` are then named, see
     :func:`check_scene`).
 
-    Attributes: ``feats`` (search part of each frame's features), ``scene``, ``holdout``
-    (held-out scene or None), ``n_min``, ``n_max``, ``cost`` (the measured cost model) and
-    ``objective`` (corrections relative to ``T_init``).
+    ``images``: the image features of an earlier stage of the same frames and settings
+    (:attr:`images`), which do not depend on the pose.
+
+    Attributes: ``feats`` (search part of each frame's features), ``images`` (each frame's
+    image features), ``scene``, ``holdout`` (held-out scene or None), ``n_min``, ``n_max``,
+    ``cost`` (the measured cost model) and ``objective`` (corrections relative to ``T_init``).
     """
 
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
                  settings: Settings, progress=None, rings: list[Rings] | None = None,
-                 cost: CostModel | None = None, view: str | None = None):
-        feats_all = prepare_features(frames, T_view, settings, progress, rings)
+                 cost: CostModel | None = None, view: str | None = None,
+                 images: list | None = None):
+        feats_all = prepare_features(frames, T_view, settings, progress, rings, images)
+        self.images = [f.image for f in feats_all]
         if view is not None:
             from .geometry import pose_error
 

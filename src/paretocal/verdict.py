@@ -112,22 +112,18 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
         ``same_basin``, ``distinct`` (farther apart than a usable calibration allows), the
         paired comparison ``mean_px`` (positive: the restart fits better), ``p_restart_better``
         (one-sided), ``frames_restart_better``, ``evaluations``), ``disagrees`` (a distinct
-        restart optimum the frames do not clearly reject) and ``evaluations``.
+        restart optimum the frames do not clearly reject), ``evaluations`` and
+        ``result_optimum`` (``x_opt``, or the one computed, (7,)).
     """
-    from .search import run_nsga2
-
-    d, s = decision, search
-    x_opt = local_optimum(objective, x) if x_opt is None else x_opt
+    found, spent = restart_searches(objective, search, decision, n_min, n_max)
+    # The restarts' local optima (and the result's, when not given) in one batch.
+    starts = found if x_opt is not None else np.vstack([x, found])
+    opt = local_optimum(objective, starts) if len(starts) else starts
+    if x_opt is None:
+        x_opt, opt = opt[0], opt[1:]
     T0 = objective.transforms(x_opt[None])[0]
-    scale = math.sqrt(d.restart_share)
     runs, evaluations = [], 0
-    for r in range(d.restarts):
-        # Never larger than the main search, however small that was.
-        rs = dataclasses.replace(s, pop=max(min(s.pop, 20), int(round(s.pop * scale))),
-                                 gens=max(min(s.gens, 10), int(round(s.gens * scale))),
-                                 seed=s.seed + 1 + r, include_init=False)
-        res = run_nsga2(objective, rs, n_min, n_max)
-        y = local_optimum(objective, res.X[int(np.argmin(res.F[:, 0]))])
+    for y, ev in zip(opt, spent):
         e = pose_error(objective.transforms(y[None])[0], T0)
         sep_px = displacement_px(objective, x_opt, y)
         same = bool(sep_px <= SAME_BASIN_SHARE * objective.scene.truncation_px)
@@ -140,8 +136,8 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
                      "distinct": distinct, "mean_px": round(cmp["mean_px"], 5),
                      "p_restart_better": round(cmp["p"], 5) if np.isfinite(cmp["p"]) else None,
                      "frames_restart_better": cmp["frames_far_better"], "frames": cmp["frames"],
-                     "evaluations": int(res.evaluations), "correction": [float(v) for v in y[:6]]})
-        evaluations += int(res.evaluations)
+                     "evaluations": ev, "correction": [float(v) for v in y[:6]]})
+        evaluations += ev
 
     def doubt(run):
         # A distinct optimum is dismissed only when the frames clearly prefer the result.
@@ -149,7 +145,27 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
         worse = p is not None and (1.0 - p) < RESTART_P
         return run["distinct"] and not worse
     return {"runs": runs, "disagrees": bool(any(doubt(r) for r in runs)),
-            "evaluations": evaluations}
+            "evaluations": evaluations, "result_optimum": x_opt}
+
+
+def restart_searches(objective, search: SearchSettings, decision: DecisionSettings,
+                     n_min: int, n_max: int) -> tuple[np.ndarray, list[int]]:
+    """The independent restarts of :func:`restart_evidence`: the best solution (7,) of each,
+    stacked (restarts, 7), and the evaluations each spent."""
+    from .search import run_nsga2
+
+    d, s = decision, search
+    scale = math.sqrt(d.restart_share)
+    found, spent = [], []
+    for r in range(d.restarts):
+        # Never larger than the main search, however small that was.
+        rs = dataclasses.replace(s, pop=max(min(s.pop, 20), int(round(s.pop * scale))),
+                                 gens=max(min(s.gens, 10), int(round(s.gens * scale))),
+                                 seed=s.seed + 1 + r, include_init=False)
+        res = run_nsga2(objective, rs, n_min, n_max)
+        found.append(res.X[int(np.argmin(res.F[:, 0]))])
+        spent.append(int(res.evaluations))
+    return np.reshape(found, (-1, 7)), spent
 
 
 def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, poses: int = CONTRAST_POSES,
@@ -246,12 +262,17 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                     quality: dict) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring)."""
-    x_opt = local_optimum(objective, x)
+    restart = None
+    if settings.decision.restarts > 0:
+        restart = restart_evidence(objective, settings.search, settings.decision, n_min,
+                                   n_max, x)
+        x_opt = np.asarray(restart.pop("result_optimum"))
+    else:
+        x_opt = local_optimum(objective, x)
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
            "intervals": intervals(quality, resolution(objective, x_opt), settings.search)}
-    if settings.decision.restarts > 0:
-        out["restart"] = restart_evidence(objective, settings.search, settings.decision, n_min,
-                                          n_max, x, x_opt)
+    if restart is not None:
+        out["restart"] = restart
     return out
 
 

@@ -120,18 +120,20 @@ def frame_rings(frame: Frame, features: FeatureSettings,
 
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
                   objective: ObjectiveSettings, rng: np.random.Generator,
-                  rings: Rings | None = None) -> FrameFeatures:
+                  rings: Rings | None = None, image: ImageFeatures | None = None) -> FrameFeatures:
     """Extract, filter and order the features of one frame.
 
     Only feature points that project into the image grown by ``view_margin_px`` at ``T_init``
     are kept: the objective compares what both sensors see, and points far outside the view
     would reward poses that pull unseen structure into the image. ``rings`` (from
-    :func:`frame_rings`) saves recovering them again.
+    :func:`frame_rings`) saves recovering them again, ``image`` (the frame's image features
+    with the same settings, from an earlier pass) computing those again: neither depends on
+    the pose.
     """
-    img = image_features(frame.image, features.blur_sigma, features.canny_low,
-                         features.canny_high, objective.truncation_px, features.min_edge_px,
-                         mask=frame.mask, relative=features.canny_relative,
-                         equalize=features.equalize)
+    img = image if image is not None else image_features(
+        frame.image, features.blur_sigma, features.canny_low, features.canny_high,
+        objective.truncation_px, features.min_edge_px, mask=frame.mask,
+        relative=features.canny_relative, equalize=features.equalize)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.

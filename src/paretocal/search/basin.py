@@ -48,7 +48,9 @@ def paired_preference(objective, near: np.ndarray, far: np.ndarray) -> dict:
     Returns ``mean_px`` (mean advantage of ``far``, positive when it scores lower), ``se_px``,
     ``t`` and its one-sided ``p`` (NaN with fewer than two frames), and ``frames_far_better``.
     """
-    from scipy.stats import t as student_t
+    # Student's t survival function as sf(t, k) = stdtr(k, -t): scipy.special, without the
+    # half second that importing scipy.stats takes.
+    from scipy.special import stdtr
 
     per = objective.chamfer(np.vstack([near, far]), ucb_k=0.0)["per_frame"]          # (2, F)
     d = per[0] - per[1]
@@ -56,7 +58,7 @@ def paired_preference(objective, near: np.ndarray, far: np.ndarray) -> dict:
     mean = float(d.mean())
     se = float(d.std(ddof=1) / np.sqrt(k)) if k > 1 else float("nan")
     t = mean / se if k > 1 and se > 0 else (float("inf") * np.sign(mean) if k > 1 else float("nan"))
-    p = float(student_t.sf(t, k - 1)) if k > 1 and np.isfinite(t) else (
+    p = float(stdtr(k - 1, -t)) if k > 1 and np.isfinite(t) else (
         0.0 if k > 1 and t > 0 else float("nan"))
     return {"mean_px": mean, "se_px": se, "t": float(t), "p": p, "frames": k,
             "frames_far_better": int((d > 0).sum())}
@@ -87,14 +89,15 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
     Returns
     -------
     X, F : ndarray
-        The front, unchanged when both optima are one basin, else rebuilt around the one
-        kept.
+        The front, unchanged when both optima are one basin or when every solution of it is
+        nearer the one kept than the other (in mean pixel displacement), else rebuilt around
+        the one kept.
     info : dict
         ``same_basin`` (bool), ``separation_px``, ``separation_deg``, ``separation_cm``, the
         paired comparison (``t``, ``mean_px``, ``p``, ...), ``departure_near`` and
         ``departure_far`` (in units of the stated initial error), ``kept`` ("near" or "far"),
-        ``ambiguous`` (bool) and ``alternative`` (the correction of the pose not kept, m and
-        deg).
+        ``ambiguous`` (bool), ``alternative`` (the correction of the pose not kept, m and
+        deg) and ``rebuilt`` (bool) when they are two basins.
     evaluations : int
     """
     from ..geometry import pose_error
@@ -103,8 +106,7 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
     best[6] = n_max
     start = np.zeros(7)
     start[6] = n_max
-    near = local_optimum(objective, start)
-    far = local_optimum(objective, best)
+    near, far = local_optimum(objective, np.vstack([start, best]))
     evals = 2 * 400                                       # polish budget, order of magnitude
     sep_px = displacement_px(objective, near, far)
     T = objective.transforms(np.vstack([near, far]))
@@ -136,6 +138,12 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
         info["ambiguous"] = bool(distinct and not keep_far and cmp["mean_px"] > 0.0)
     kept, other = (far, near) if keep_far else (near, far)
     info.update(kept="far" if keep_far else "near", alternative=[float(v) for v in other[:6]])
+    if np.all(displacement_px(objective, kept, X) < displacement_px(objective, other, X)):
+        # Every solution of the front is nearer the basin kept than the other one: the front
+        # was polished there already (as a rule the search's basin was kept).
+        info["rebuilt"] = False
+        return X, F, info, evals
+    info["rebuilt"] = True
     # Rebuild the front around the basin kept: every n of the front starts from its optimum
     # (a front polished solution by solution may straddle both basins).
     ns = np.unique(X[:, 6])

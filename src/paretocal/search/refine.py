@@ -13,7 +13,8 @@ FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps
 
 
 def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
-                 n_max: int, iters: int, grid: int = 12, max_front: int = 32):
+                 n_max: int, iters: int, grid: int = 12, max_front: int = 32,
+                 hessian_every: int = 1):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
@@ -38,7 +39,8 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings
 
     def run(seeds):
         nonlocal evals
-        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu)
+        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu,
+                                 hessian_every=hessian_every)
         Z, f, e2 = polish(fun, Z, step=FINISH_STEP, lower=xl, upper=xu)
         evals += e1 + e2
         return Z, f
