@@ -161,3 +161,37 @@ class TestEngines:
         X0 = Recorder.first
         assert np.any(np.all(X0[:, :6] == 0.0, axis=1))             # the zero correction
         assert np.any(np.all(np.isclose(X0[:, :6], seeds[0]), axis=1))
+
+
+def test_survival_ranks_and_crowding_are_pymoos(rng):
+    """The engine's survival takes pymoo's fronts (moocore's ranks, one stable sort) and its
+    crowding distance (compiled, every front at once): the same values bit for bit, ties,
+    duplicates and fronts of one or two points included."""
+    from pymoo.operators.survival.rank_and_crowding.metrics import get_crowding_function
+    from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+    from paretocal.search.lean import LeanNSGA2
+
+    engine = LeanNSGA2(None, np.zeros(7), np.ones(7), 10, None)
+    cd = get_crowding_function("cd")
+    for trial in range(200):
+        m = int(rng.integers(1, 120))
+        F = rng.normal(size=(m, 2)).round(int(rng.integers(0, 3)))   # many ties
+        if trial % 3 == 0:
+            F[rng.integers(0, m, m // 3)] = F[0]                     # duplicates
+        n_survive = int(rng.integers(1, m + 1))
+        rank, crowd, keep = engine._survive(F, n_survive, np.random.default_rng(trial))
+        fronts = NonDominatedSorting().do(F, n_stop_if_ranked=n_survive)
+        assert len(keep) == n_survive
+        ref_rank = np.concatenate([np.full(len(f), k) for k, f in enumerate(fronts)])
+        ref_cd = np.concatenate([cd.do(F[f], n_remove=0) for f in fronts])
+        ref_idx = np.concatenate(fronts)
+        full = len(ref_idx) == n_survive
+        if full:                                  # no split of the last front: all compared
+            np.testing.assert_array_equal(keep, ref_idx)
+            np.testing.assert_array_equal(rank, ref_rank)
+            np.testing.assert_array_equal(crowd, ref_cd)
+        else:                                     # the kept part of the split front
+            where = {int(i): k for k, i in enumerate(ref_idx)}
+            np.testing.assert_array_equal(crowd, ref_cd[[where[int(i)] for i in keep]])
+            np.testing.assert_array_equal(rank, ref_rank[[where[int(i)] for i in keep]])
