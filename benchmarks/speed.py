@@ -7,7 +7,8 @@ Prints:
    Chamfer with a KD-tree built per evaluation, timed with psutil over 3 repetitions, as the
    paper describes), the numpy batched evaluator and the fused numba kernel, at the same n, and
    their ratios; then the fused kernel through each camera model (ideal and distorted
-   pinhole, Mei, fisheye);
+   pinhole, Mei, fisheye), and against the machine's limits (the same projection without
+   reading the distance transform, and with one read instead of four);
 2. wall time and peak RSS of a paper-scale NSGA-II search (population 1000 x 200 generations)
    on 1 and 5 frames, split into objective time and optimiser overhead, each in a fresh process,
    and of the full calibration (search, seeds and polish) at that scale;
@@ -133,6 +134,84 @@ def camera_models(frames, settings, n=1000, quick=False):
         print(f"   {k:<20} {eps:10,.0f} {eps * n * scene.n_frames:10.3g} "
               f"{eps / out['ideal pinhole']:10.2f}x")
     return out
+
+
+def _limit_kernels():
+    """Two stripped copies of the fused kernel's ideal-pinhole path on one frame, for the
+    limits of section 1c: ``project`` projects and sums the fractions (no distance-transform
+    read), ``nearest`` reads one pixel per point instead of the bilinear four."""
+    import numba
+    from numba import njit, prange
+
+    from paretocal.objective.kernel import BLOCK, _pinhole_block
+
+    def make(lookup):
+        @njit(parallel=True, error_model="numpy")
+        def run(A, x, y, z, dtq, w, h, z_min, n, KS, FS, OS):
+            out = np.zeros(A.shape[0])
+            for c in prange(A.shape[0]):
+                t = numba.get_thread_id()
+                KB, FXB, FYB, OKB = KS[t], FS[t, 0], FS[t, 1], OS[t]
+                s = 0.0
+                for b in range(0, n, BLOCK):
+                    bb = min(b + BLOCK, n)
+                    _pinhole_block(A[c, 0], A[c, 1], A[c, 2], A[c, 3], A[c, 4], A[c, 5],
+                                   A[c, 6], A[c, 7], A[c, 8], A[c, 9], A[c, 10], A[c, 11],
+                                   x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB, FYB, OKB)
+                    for j in range(bb - b):
+                        if lookup:
+                            d = np.float64(dtq[KB[j]]) if OKB[j] else 1.0
+                        else:
+                            d = FXB[j] + FYB[j] if OKB[j] else 1.0
+                        s += d
+                        s += d * d
+                out[c] = s
+            return out
+        return run
+    return make(False), make(True)
+
+
+def kernel_limits(frames, settings, n=1000, quick=False):
+    """Section 1c: the fused kernel against what this machine allows it, one frame, n points.
+
+    ``projection only``: the kernel's projection and in-order sums without reading the
+    distance transform (the arithmetic limit); ``nearest pixel``: one read per point; the
+    kernel reads four (bilinear). On one thread and on all of numba's threads.
+    """
+    import numba
+
+    from paretocal.objective import sums_numba
+    from paretocal.objective.kernel import BLOCK
+
+    scene, _ = _scene(frames[:1], settings)
+    n = min(n, int(scene.points_per_frame[0]))
+    T, _ = _population(frames[0].T_ref, 1000, n, np.random.default_rng(0))
+    nn = np.full(len(T), n)
+    K = scene.K[0]
+    P = np.einsum("ij,cjk->cik", K, T[:, :3, :])              # (C, 3, 4): K @ T[:3]
+    A = np.ascontiguousarray(np.concatenate([P[:, 0], P[:, 1], T[:, 2, :]], axis=1))
+    threads_all = numba.get_num_threads()
+    Tn = numba.config.NUMBA_NUM_THREADS
+    scratch = (np.empty((Tn, BLOCK), np.int64), np.empty((Tn, 2, BLOCK)),
+               np.empty((Tn, BLOCK), np.bool_))
+    project, nearest = _limit_kernels()
+    args = (scene.x[:n], scene.y[:n], scene.z[:n], scene.dtq, int(scene.width[0]),
+            int(scene.height[0]), float(scene.z_min), n) + scratch
+    cases = {"fused kernel (bilinear, 4 reads)": lambda: sums_numba(scene, T, nn),
+             "nearest pixel (1 read)": lambda: nearest(A, *args),
+             "projection only (arithmetic limit)": lambda: project(A, *args)}
+    rates = {}
+    for threads in sorted({1, threads_all}):
+        numba.set_num_threads(threads)
+        for k, fn in cases.items():
+            rates[(k, threads)] = len(T) * n / _best_of(fn, 3 if quick else 10)
+    numba.set_num_threads(threads_all)
+    print(f"\n1c. Fused kernel against this machine's limits, 1 frame, n = {n}, "
+          f"population {len(T)} (points/s)")
+    print(f"   {'':<36} {'1 thread':>10} {f'{threads_all} threads':>11}")
+    for k in cases:
+        print(f"   {k:<36} {rates[(k, 1)]:10.3g} {rates[(k, threads_all)]:11.3g}")
+    return {f"{k} ({t} threads)": v for (k, t), v in rates.items()}
 
 
 def optimiser_overhead(quick=False):
@@ -375,6 +454,7 @@ def main() -> int:
     res = {"default_run": default_run(),
            "evaluators": evaluators(frames, settings, quick=args.quick),
            "camera_models": camera_models(frames, settings, quick=args.quick),
+           "kernel_limits": kernel_limits(frames, settings, quick=args.quick),
            "overhead_ms": optimiser_overhead(quick=args.quick),
            "paper_scale": paper_scale(quick=args.quick),
            "scaling": scaling(frames, settings, args.png, quick=args.quick),
