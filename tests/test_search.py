@@ -195,3 +195,30 @@ def test_survival_ranks_and_crowding_are_pymoos(rng):
             where = {int(i): k for k, i in enumerate(ref_idx)}
             np.testing.assert_array_equal(crowd, ref_cd[[where[int(i)] for i in keep]])
             np.testing.assert_array_equal(rank, ref_rank[[where[int(i)] for i in keep]])
+
+
+def test_a_front_polished_without_exploring_keeps_its_n():
+    """``polish_front(explore=False)`` (the basin test's polish from one optimum) polishes the
+    given solutions only: every n of the result is one of theirs, with fewer evaluations than
+    the exploring polish (n grid, valley starts, cross-seeds), which adds n values."""
+    from paretocal.search.refine import polish_front
+
+    center = np.array([0.02, -0.01, 0.03, 0.4, -0.3, 0.2])
+
+    class Bowl:
+        def chamfer(self, X):
+            d = X[:, :6] - center
+            return {"f1": (d * d).sum(axis=1) + 1.0 / np.sqrt(X[:, 6])}
+
+        def cost(self, X):
+            return {"f2": X[:, 6].astype(float)}
+
+    s = SearchSettings(bound_t_m=0.3, bound_r_deg=3)
+    X = np.zeros((4, 7))
+    X[:, 6] = [50, 100, 200, 400]
+    F = np.column_stack([Bowl().chamfer(X)["f1"], X[:, 6]])
+    Xa, Fa, ea = polish_front(Bowl(), X, F, s, 10, 1000, 4, explore=False)
+    Xb, Fb, eb = polish_front(Bowl(), X, F, s, 10, 1000, 4)
+    assert set(Xa[:, 6]) <= {50, 100, 200, 400} and ea < eb
+    assert len(set(Xb[:, 6]) - {50, 100, 200, 400}) > 0
+    np.testing.assert_allclose(Xa[:, :6], np.tile(center, (len(Xa), 1)), atol=2e-3)

@@ -89,15 +89,16 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
     Returns
     -------
     X, F : ndarray
-        The front, unchanged when both optima are one basin or when every solution of it is
-        nearer the one kept than the other (in mean pixel displacement), else rebuilt around
-        the one kept.
+        The front, unchanged when both optima are one basin; else every n of it polished
+        again from the optimum kept, and when a solution of it lies nearer the other optimum
+        (in mean pixel displacement), rebuilt around the one kept (n grid, valleys,
+        cross-seeds: :func:`polish_front`).
     info : dict
         ``same_basin`` (bool), ``separation_px``, ``separation_deg``, ``separation_cm``, the
         paired comparison (``t``, ``mean_px``, ``p``, ...), ``departure_near`` and
         ``departure_far`` (in units of the stated initial error), ``kept`` ("near" or "far"),
         ``ambiguous`` (bool), ``alternative`` (the correction of the pose not kept, m and
-        deg) and ``rebuilt`` (bool) when they are two basins.
+        deg) and ``rebuilt`` (bool: the whole front rebuilt) when they are two basins.
     evaluations : int
     """
     from ..geometry import pose_error
@@ -138,16 +139,15 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
         info["ambiguous"] = bool(distinct and not keep_far and cmp["mean_px"] > 0.0)
     kept, other = (far, near) if keep_far else (near, far)
     info.update(kept="far" if keep_far else "near", alternative=[float(v) for v in other[:6]])
-    if np.all(displacement_px(objective, kept, X) < displacement_px(objective, other, X)):
-        # Every solution of the front is nearer the basin kept than the other one: the front
-        # was polished there already (as a rule the search's basin was kept).
-        info["rebuilt"] = False
-        return X, F, info, evals
-    info["rebuilt"] = True
+    # A front whose every solution is nearer the basin kept than the other one was explored
+    # there already (as a rule the search's basin was kept): each n is only polished again from
+    # the optimum kept. Otherwise the whole front is rebuilt around it.
+    rebuild = not np.all(displacement_px(objective, kept, X) < displacement_px(objective, other, X))
+    info["rebuilt"] = bool(rebuild)
     # Rebuild the front around the basin kept: every n of the front starts from its optimum
     # (a front polished solution by solution may straddle both basins).
     ns = np.unique(X[:, 6])
     Xn = np.column_stack([np.tile(kept[:6], (len(ns), 1)), ns])
     Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), search, n_min, n_max,
-                               refine_iters)
+                               refine_iters, explore=rebuild)
     return Xn, Fn, info, evals + ev + len(Xn)

@@ -14,7 +14,7 @@ FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps
 
 def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
                  n_max: int, iters: int, grid: int = 12, max_front: int = 32,
-                 hessian_every: int = 1):
+                 explore: bool = True):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow
@@ -32,6 +32,10 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings
     almost as good. Starts along the three flattest eigen-directions of the Hessian at the
     largest n are polished, and the best pose at the largest n then seeds every n of the
     front again; each n keeps whichever basin scores lower.
+
+    ``explore=False`` polishes the solutions of ``X`` and nothing else (no n grid, valley
+    starts or cross-seeding): for a front whose every solution already starts from one
+    well-polished pose.
     """
     xl, xu = bounds(search, n_min, n_max)
     fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731
@@ -39,8 +43,7 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings
 
     def run(seeds):
         nonlocal evals
-        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu,
-                                 hessian_every=hessian_every)
+        Z, _, e1 = newton_polish(fun, seeds, iters=iters, lower=xl, upper=xu)
         Z, f, e2 = polish(fun, Z, step=FINISH_STEP, lower=xl, upper=xu)
         evals += e1 + e2
         return Z, f
@@ -50,6 +53,9 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings
     def with_grid(pose):
         return np.column_stack([np.tile(pose[:6], (len(ns), 1)), ns])
 
+    if not explore:
+        P, fP = run(X)
+        return (*front_of(P, np.column_stack([fP, objective.cost(P)["f2"]])), evals)
     best = X[np.argmin(F[:, 0])]
     if len(X) > max_front:
         # Polish a subset spread evenly along the front by cost: enough to draw the trade-off.
