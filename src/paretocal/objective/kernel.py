@@ -58,6 +58,16 @@ if HAVE_NUMBA:
         KB[j] = y0 * w + x0
         OKB[j] = ok
 
+    @njit(cache=True, error_model="numpy", inline="always")
+    def _camera_point(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, x, y,
+                      z):  # pragma: no cover - compiled
+        """A float32 LiDAR point in the camera frame (float64), by the rows ``r**`` of T[:3]."""
+        X = np.float64(x)
+        Y = np.float64(y)
+        Z = np.float64(z)
+        return (r00 * X + r01 * Y + r02 * Z + r03, r10 * X + r11 * Y + r12 * Z + r13,
+                r20 * X + r21 * Y + r22 * Z + r23)
+
     @njit(cache=True, error_model="numpy")
     def _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22, r23, x, y, z,
                        w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
@@ -98,12 +108,8 @@ if HAVE_NUMBA:
         umax = w - 1.0
         vmax = h - 1.0
         for j in range(x.shape[0]):
-            X = np.float64(x[j])
-            Y = np.float64(y[j])
-            Z = np.float64(z[j])
-            xc = r00 * X + r01 * Y + r02 * Z + r03
-            yc = r10 * X + r11 * Y + r12 * Z + r13
-            zc = r20 * X + r21 * Y + r22 * Z + r23
+            xc, yc, zc = _camera_point(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
+                                       r23, x[j], y[j], z[j])
             n2 = xc * xc + yc * yc + zc * zc
             norm = np.sqrt(n2)
             ok = ((n2 > z_min2) & (zc > zs_min * norm)) if mei else zc > z_min
@@ -134,12 +140,8 @@ if HAVE_NUMBA:
         umax = w - 1.0
         vmax = h - 1.0
         for j in range(x.shape[0]):
-            X = np.float64(x[j])
-            Y = np.float64(y[j])
-            Z = np.float64(z[j])
-            xc = r00 * X + r01 * Y + r02 * Z + r03
-            yc = r10 * X + r11 * Y + r12 * Z + r13
-            zc = r20 * X + r21 * Y + r22 * Z + r23
+            xc, yc, zc = _camera_point(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
+                                       r23, x[j], y[j], z[j])
             ok = False
             xd = 0.0
             yd = 0.0
