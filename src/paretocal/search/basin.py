@@ -139,13 +139,12 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
         info["ambiguous"] = bool(distinct and not keep_far and cmp["mean_px"] > 0.0)
     kept, other = (far, near) if keep_far else (near, far)
     info.update(kept="far" if keep_far else "near", alternative=[float(v) for v in other[:6]])
-    # A front whose every solution is nearer the basin kept than the other one was explored
-    # there already (as a rule the search's basin was kept): each n is only polished again from
-    # the optimum kept. Otherwise the whole front is rebuilt around it.
+    # Every n of the front starts again from the optimum kept (a front polished solution by
+    # solution may straddle both basins). A front whose every solution is nearer the basin
+    # kept than the other was explored there already (as a rule the search's basin was kept):
+    # each n is only polished again; otherwise the whole front is rebuilt around it.
     rebuild = not np.all(displacement_px(objective, kept, X) < displacement_px(objective, other, X))
     info["rebuilt"] = bool(rebuild)
-    # Rebuild the front around the basin kept: every n of the front starts from its optimum
-    # (a front polished solution by solution may straddle both basins).
     ns = np.unique(X[:, 6])
     Xn = np.column_stack([np.tile(kept[:6], (len(ns), 1)), ns])
     Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), search, n_min, n_max,

@@ -151,26 +151,12 @@ def newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_step: float,
     return step * h
 
 
-def fd_gradient(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> np.ndarray:
-    """Central-difference gradient of f1 (k, 6), per metre / degree, from 12 evaluations per
-    solution of X (k, 7)."""
-    k = len(X)
-    e = np.eye(6) * h
-    cand = np.repeat(X[:, None, :], 12, axis=1)
-    cand[:, :, :6] += np.vstack([e, -e])[None]
-    v = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(k, 12)
-    return (v[:, :6] - v[:, 6:]) / (2 * h)
-
-
 def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters: int = 8,
                   max_step: float = 3.0, lower: np.ndarray | None = None,
-                  upper: np.ndarray | None = None, eig_floor: float = 1e-3,
-                  hessian_every: int = 1):
+                  upper: np.ndarray | None = None, eig_floor: float = 1e-3):
     """Damped Newton steps with finite-difference derivatives, batched over solutions.
 
-    An iteration costs 28 + 5 evaluations per solution, or 12 + 5 when it reuses the Hessian
-    of an earlier iteration (``hessian_every`` > 1: the Hessian is measured on iterations 0,
-    ``hessian_every``, ...; the gradient on every one). Directions come from the Hessian with
+    Each iteration costs 28 + 5 evaluations per solution. Directions come from the Hessian with
     its eigenvalues floored (so the step always descends); steps are capped at ``max_step``
     difference steps, and a line search over {1, 1/2, 1/4, 1/8, 1/16} keeps a step only when
     it lowers f1. Unlike a coordinate search, this follows the narrow diagonal valleys that
@@ -190,20 +176,13 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
     evals = 0
     alphas = np.array([1.0, 0.5, 0.25, 0.125, 0.0625])
     active = np.ones(k, dtype=bool)
-    hess = np.zeros((k, 6, 6))
-    for it in range(iters):
+    for _ in range(iters):
         idx = np.flatnonzero(active)
         if len(idx) == 0:
             break
-        if it % max(1, hessian_every) == 0:
-            f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
-            hess[idx] = H
-            evals += 28 * len(idx)
-            f[idx] = np.minimum(f[idx], f0)
-        else:
-            # f[idx] is the value at X[idx]: the line search's accepted point.
-            g, H = fd_gradient(chamfer, X[idx], h), hess[idx]
-            evals += 12 * len(idx)
+        f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
+        evals += 28 * len(idx)
+        f[idx] = np.minimum(f[idx], f0)
         step = newton_step(g, H, h, max_step, eig_floor)
         cand = np.repeat(X[idx, None, :], len(alphas), axis=1)
         cand[:, :, :6] += alphas[None, :, None] * step[:, None, :]
