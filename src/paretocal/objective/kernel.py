@@ -46,9 +46,11 @@ if HAVE_NUMBA:
 
     @njit(cache=True, error_model="numpy", inline="always")
     def _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
-        """Store the bilinear footprint of (u, v) as entry j of the scratch: the flat index of
-        its top-left pixel in the frame, the fractions, and ``ok`` (points not ok read pixel 0,
-        harmlessly, so the loop has no branch)."""
+        """Store the bilinear footprint of pixel (u, v) as entry j of the scratch: the flat
+        index of its top-left pixel in the frame, the fractions, and whether the point counts:
+        ``ok`` (valid for the camera model) and inside the w x h image. Points that do not
+        count read pixel 0, harmlessly, so the loop has no branch."""
+        ok = ok & (u >= 0.0) & (u <= w - 1.0) & (v >= 0.0) & (v <= h - 1.0)
         u = u if ok else 0.0
         v = v if ok else 0.0
         x0 = min(int(u), w - 2)
@@ -74,8 +76,6 @@ if HAVE_NUMBA:
         """Project the points (x, y, z) (m,) through an ideal pinhole into the scratch: the rows
         ``a0*``, ``a1*`` of ``K @ T[:3]`` and the depth row ``r2*`` of ``T``. One division
         per point, no branch: the loop vectorises."""
-        umax = w - 1.0
-        vmax = h - 1.0
         for j in range(x.shape[0]):
             X = np.float64(x[j])
             Y = np.float64(y[j])
@@ -84,8 +84,7 @@ if HAVE_NUMBA:
             iz = 1.0 / zc
             u = (a00 * X + a01 * Y + a02 * Z + a03) * iz
             v = (a10 * X + a11 * Y + a12 * Z + a13) * iz
-            ok = (zc > z_min) & (u >= 0.0) & (u <= umax) & (v >= 0.0) & (v <= vmax)
-            _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
+            _footprint(u, v, zc > z_min, w, h, j, KB, FXB, FYB, OKB)
 
     @njit(cache=True, error_model="numpy")
     def _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y, z,
@@ -105,8 +104,6 @@ if HAVE_NUMBA:
         lim = cam[P_LIMIT]
         zs_min = cam[P_ZS_MIN]
         z_min2 = z_min * z_min
-        umax = w - 1.0
-        vmax = h - 1.0
         for j in range(x.shape[0]):
             xc, yc, zc = _camera_point(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
                                        r23, x[j], y[j], z[j])
@@ -126,8 +123,7 @@ if HAVE_NUMBA:
             yd = yn * rad + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy + s3 * r2 + s4 * r4
             u = fx_ * xd + sk * yd + cx_
             v = fy_ * yd + cy_
-            ok = ok & (r2 < lim) & (u >= 0.0) & (u <= umax) & (v >= 0.0) & (v <= vmax)
-            _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
+            _footprint(u, v, ok & (r2 < lim), w, h, j, KB, FXB, FYB, OKB)
 
     @njit(cache=True, error_model="numpy")
     def _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y,
@@ -137,8 +133,6 @@ if HAVE_NUMBA:
         k1, k2, k3, k4 = cam[P_K1], cam[P_K1 + 1], cam[P_K1 + 2], cam[P_K1 + 3]
         lim = cam[P_LIMIT]
         z_min2 = z_min * z_min
-        umax = w - 1.0
-        vmax = h - 1.0
         for j in range(x.shape[0]):
             xc, yc, zc = _camera_point(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
                                        r23, x[j], y[j], z[j])
@@ -158,7 +152,6 @@ if HAVE_NUMBA:
                     ok = True
             u = fx_ * xd + sk * yd + cx_
             v = fy_ * yd + cy_
-            ok = ok and u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax
             _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
 
     @njit(cache=True, error_model="numpy")
