@@ -101,7 +101,7 @@ class TestNSGA2:
 
         def progress(gen, total, best):
             if gen == 4:
-                STOP.requested = True
+                STOP.request()
         s = SearchSettings(pop=20, gens=15, seed=7, bound_t_m=3, bound_r_deg=3)
         with pytest.raises(SearchInterrupted) as info:
             run_nsga2(self.Toy(), s, 10, 1000, progress=progress)

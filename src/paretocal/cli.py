@@ -783,7 +783,7 @@ class _Stop:
     def __call__(self, signum, frame):
         self.signals += 1
         if self.signals == 1:
-            STOP.requested = True
+            STOP.request()
             raise KeyboardInterrupt
         import os
 
@@ -816,7 +816,8 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     verbose = "--verbose" in args or "-v" in args
     name = next((a for a in args if not a.startswith("-")), None)
-    _STOP.signals, _STOP.reported, STOP.requested = 0, False, False
+    _STOP.signals, _STOP.reported = 0, False
+    STOP.clear()
     # SIGTERM stops a run the way Ctrl-C does: checkpoint kept, partial front written.
     main_thread = threading.current_thread() is threading.main_thread()
     # A signal ignored when the process started (a background job of a shell, nohup) stays

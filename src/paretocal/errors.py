@@ -62,10 +62,19 @@ class StopRequest:
     def __init__(self):
         self.requested = False
 
+    def request(self) -> None:
+        """Record a stop (the signal handler, beside the KeyboardInterrupt it raises)."""
+        self.requested = True
+
+    def clear(self) -> None:
+        """Forget the request: it was taken (the interrupt reached a handler), or a new
+        command starts."""
+        self.requested = False
+
     def check(self) -> None:
         """Raise ``KeyboardInterrupt`` when a stop was requested and not yet taken."""
         if self.requested:
-            self.requested = False
+            self.clear()
             raise KeyboardInterrupt
 
 

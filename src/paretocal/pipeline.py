@@ -157,7 +157,7 @@ def _timed(timings: dict[str, float], name: str):
         yield
         STOP.check()
     except KeyboardInterrupt:
-        STOP.requested = False                    # taken
+        STOP.clear()                              # taken
         raise Interrupted(PHASES[name]) from None
     finally:
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0

@@ -140,7 +140,7 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
             if checkpoint is not None and state.generation % checkpoint.every == 0:
                 checkpoint.save(state, history)
     except KeyboardInterrupt:
-        STOP.requested = False                    # taken
+        STOP.clear()                              # taken
         if checkpoint is not None:
             checkpoint.save(state, history)
         Xf, Ff = front_of(state.X, state.F)
