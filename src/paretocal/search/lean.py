@@ -7,10 +7,9 @@ pymoo for everything that is NSGA-II: the binary tournament rule (domination, th
 distance), ``SBX`` and ``PM`` (their array kernels, with the same mating probability), the
 Pareto ranking (moocore's, as pymoo's ``NonDominatedSorting``; its fronts are taken here in one
 stable sort instead of one scan of the ranks per front) and the randomised split of the last
-front. The crowding distance is
-pymoo's, computed for every front in one compiled call (:func:`crowding_distances`): pymoo's
-per-front call cost 50 us, and a population spread over n has some 200 fronts (3 of the 5 s
-of a paper-scale search on one frame).
+front. The crowding distance is pymoo's, computed for every front in one compiled call
+(:func:`crowding_distances`): pymoo's per-front call cost 50 us, and a population spread over
+n has some 200 fronts (3 of the 5 s of a paper-scale search on one frame).
 
 The whole state is a few arrays and a numpy Generator, so a run can be checkpointed and resumed
 exactly (:mod:`paretocal.search.checkpoint` stores it as arrays and JSON).
@@ -24,11 +23,12 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
+from moocore import pareto_rank
 from numba import njit
 from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.pm import PM
-from moocore import pareto_rank
 from pymoo.util.randomized_argsort import randomized_argsort
+
 
 @njit(cache=True)
 def _front_crowding(G: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
