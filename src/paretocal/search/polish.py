@@ -77,7 +77,8 @@ def fd_stencil(h: np.ndarray) -> np.ndarray:
     return np.vstack([np.zeros(6), e, -e, pairs])
 
 
-def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP):
+def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP,
+                        f0: np.ndarray | None = None):
     """Finite-difference gradient and Hessian of f1 over the pose, for many solutions at once.
 
     Parameters
@@ -87,6 +88,9 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
     X : ndarray, shape (k, 7)
     h : ndarray, shape (6,)
         Difference steps (m, deg); large enough to average over pixel-scale roughness.
+    f0 : ndarray, shape (k,), optional
+        f1 at X when already known (the stencil's centre is then not evaluated again; the
+        objective is deterministic, so the derivatives are the same).
 
     Returns
     -------
@@ -98,9 +102,13 @@ def fd_gradient_hessian(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP)
     """
     k = len(X)
     S = fd_stencil(h)
+    if f0 is not None:
+        S = S[1:]
     cand = np.repeat(X[:, None, :], len(S), axis=1)
     cand[:, :, :6] += S[None]
     v = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(k, len(S))
+    if f0 is not None:
+        v = np.column_stack([np.asarray(f0, dtype=np.float64), v])
     return stencil_derivatives(v, h)
 
 
@@ -156,7 +164,8 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
                   upper: np.ndarray | None = None, eig_floor: float = 1e-3):
     """Damped Newton steps with finite-difference derivatives, batched over solutions.
 
-    Each iteration costs 28 + 5 evaluations per solution. Directions come from the Hessian with
+    Each iteration costs 28 + 5 evaluations per solution (27 + 5 after the first: the
+    stencil's centre is the point the last line search evaluated). Directions come from the Hessian with
     its eigenvalues floored (so the step always descends); steps are capped at ``max_step``
     difference steps, and a line search over {1, 1/2, 1/4, 1/8, 1/16} keeps a step only when
     it lowers f1. Unlike a coordinate search, this follows the narrow diagonal valleys that
@@ -180,8 +189,9 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
         idx = np.flatnonzero(active)
         if len(idx) == 0:
             break
-        f0, g, H = fd_gradient_hessian(chamfer, X[idx], h)
-        evals += 28 * len(idx)
+        known = f[idx] if np.all(np.isfinite(f[idx])) else None
+        f0, g, H = fd_gradient_hessian(chamfer, X[idx], h, known)
+        evals += (28 if known is None else 27) * len(idx)
         f[idx] = np.minimum(f[idx], f0)
         step = newton_step(g, H, h, max_step, eig_floor)
         cand = np.repeat(X[idx, None, :], len(alphas), axis=1)
