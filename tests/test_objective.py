@@ -191,6 +191,42 @@ class TestCombine:
         assert k["se"][0] == pytest.approx(1.0)
         assert k["f1"][0] == pytest.approx(out["f1"][0] + 3.0)
 
+    def test_compiled_pass_is_numpys_arithmetic_bit_for_bit(self):
+        # The array-operation form of combine (what the compiled per-group pass replaced),
+        # against the compiled one on sums with empty groups, single points, zero variance,
+        # negative rounding residues and weights of every sign.
+        def reference(S1, S2, W1, W2, outside, weights, ucb_k):
+            has = W1 > 0
+            safe = np.where(has, W1, 1.0)
+            mean = np.where(has, S1 / safe, outside[None, :, None])
+            n_eff = np.where(has, W1 * W1 / np.where(W2 > 0, W2, 1.0), 0.0)
+            var = np.where(n_eff > 1, (S2 / safe - mean**2) * n_eff
+                           / np.maximum(n_eff - 1.0, 1e-12), 0.0)
+            var = np.maximum(var, 0.0)
+            F = S1.shape[1]
+            term = (mean * weights).sum(axis=2)
+            se2 = (np.where(n_eff > 0, var / np.maximum(n_eff, 1e-12), 0.0)
+                   * weights**2)[..., weights != 0].sum(axis=(1, 2)) / F**2
+            se = np.sqrt(se2)
+            return {"f1": term.mean(axis=1) + ucb_k * se, "mean": mean.mean(axis=1),
+                    "se": se, "per_frame": term}
+
+        rng = np.random.default_rng(5)
+        for C, F in [(1, 1), (3, 7), (50, 20), (7, 33)]:
+            W1 = rng.choice([0.0, 1.0, 0.7, 3.0, 250.0], size=(C, F, 3)) * rng.uniform(
+                0.5, 1.5, (C, F, 3))
+            W2 = np.where(W1 > 0, W1 * rng.uniform(0.3, 1.0, W1.shape), 0.0)
+            d = rng.uniform(0, 10, (C, F, 3))
+            S1 = W1 * d
+            S2 = np.where(rng.random(W1.shape) < 0.2, S1 * d, W1 * (d * d + rng.uniform(
+                0, 4, W1.shape)))           # some exact d^2 (zero variance up to rounding)
+            outside = rng.uniform(3, 8, F).astype(np.float32)
+            for weights in (np.array([0.7, 0.3, -0.2]), np.array([1.0, 0.0, -0.5])):
+                got = combine(S1, S2, W1, W2, outside, weights, 4.6)
+                want = reference(S1, S2, W1, W2, outside, weights, 4.6)
+                for key in want:
+                    np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+
     def test_sampling_error_shrinks_with_n(self, scene_and_feats):
         scene, feats, T = scene_and_feats
         s = Settings()

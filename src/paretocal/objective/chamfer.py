@@ -24,6 +24,7 @@ with ``rho`` the truncated DT value at the projected point (``outside`` when out
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..features.lidar import DEPTH_EDGE, INTENSITY_EDGE, SMOOTH
 from .scene import N_GROUPS
@@ -58,18 +59,47 @@ def combine(S1: np.ndarray, S2: np.ndarray, W1: np.ndarray, W2: np.ndarray,
     dict with ``f1`` (C,), ``mean`` (C, G) group means over frames in px, ``se`` (C,) and
     ``per_frame`` (C, F), each frame's weighted term (no sampling-error charge)
     """
-    has = W1 > 0
-    safe = np.where(has, W1, 1.0)
-    mean = np.where(has, S1 / safe, outside[None, :, None])
-    # Weighted variance and Kish's effective sample size n_eff = W1^2 / W2.
-    n_eff = np.where(has, W1 * W1 / np.where(W2 > 0, W2, 1.0), 0.0)
-    var = np.where(n_eff > 1, (S2 / safe - mean**2) * n_eff / np.maximum(n_eff - 1.0, 1e-12), 0.0)
-    var = np.maximum(var, 0.0)
-    active = weights != 0
+    mean, term_parts, se_parts = _per_group(S1, S2, W1, W2, outside.astype(np.float64),
+                                            np.asarray(weights, dtype=np.float64))
     F = S1.shape[1]
-    term = (mean * weights).sum(axis=2)                                 # (C, F)
-    se2 = (np.where(n_eff > 0, var / np.maximum(n_eff, 1e-12), 0.0)
-           * weights**2)[..., active].sum(axis=(1, 2)) / F**2
+    # The reductions stay numpy's (pairwise sums), so f1 is the same bit for bit as when every
+    # step was a numpy array operation.
+    term = term_parts.sum(axis=2)                                       # (C, F)
+    se2 = se_parts[..., weights != 0].sum(axis=(1, 2)) / F**2
     se = np.sqrt(se2)
     f1 = term.mean(axis=1) + ucb_k * se
     return {"f1": f1, "mean": mean.mean(axis=1), "se": se, "per_frame": term}
+
+
+@njit(cache=True, error_model="numpy")
+def _per_group(S1, S2, W1, W2, outside, weights):  # pragma: no cover - compiled
+    """Per (candidate, frame, group): the mean cost (``outside[f]`` for an empty group), the
+    weighted mean, and the weighted squared sampling error, each (C, F, G), in one pass.
+
+    The arithmetic is numpy's elementwise arithmetic op for op: weighted variance with Kish's
+    effective sample size ``n_eff = W1^2 / W2``, Bessel-corrected, floored at 0.
+    """
+    C, F, G = S1.shape
+    mean = np.empty((C, F, G))
+    wmean = np.empty((C, F, G))
+    se_part = np.empty((C, F, G))
+    for c in range(C):
+        for f in range(F):
+            for g in range(G):
+                w1 = W1[c, f, g]
+                w2 = W2[c, f, g]
+                has = w1 > 0
+                safe = w1 if has else 1.0
+                m = S1[c, f, g] / safe if has else outside[f]
+                n_eff = w1 * w1 / (w2 if w2 > 0 else 1.0) if has else 0.0
+                var = 0.0
+                if n_eff > 1:
+                    var = (S2[c, f, g] / safe - m * m) * n_eff / max(n_eff - 1.0, 1e-12)
+                # np.maximum(var, 0.0): a NaN stays NaN, -0.0 stays -0.0.
+                var = var if (var >= 0.0 or var != var) else 0.0
+                q = var / max(n_eff, 1e-12) if n_eff > 0 else 0.0
+                wg = weights[g]
+                mean[c, f, g] = m
+                wmean[c, f, g] = m * wg
+                se_part[c, f, g] = q * (wg * wg)
+    return mean, wmean, se_part
