@@ -10,9 +10,9 @@ per-group weighted sums of the cost and of its square, shape (C, F, G), from whi
 takes means and sampling errors.
 
 Three implementations give the same sums: a fused numba kernel (parallel over candidates; each
-block of 256 points is projected by one branch-free, vectorised loop into per-thread scratch and
-then looked up and summed in point order), a numpy fallback batched over candidates, and a
-KD-tree oracle that measures exact distances to the edge pixels.
+block of 256 points is projected by one branch-free, vectorised loop into per-thread scratch,
+then read, interpolated and summed in point order in three passes), a numpy fallback batched
+over candidates, and a KD-tree oracle that measures exact distances to the edge pixels.
 """
 
 from __future__ import annotations
