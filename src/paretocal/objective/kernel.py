@@ -37,7 +37,8 @@ SERIAL_BELOW = 4  # batches of fewer candidates run on one thread (see sums_numb
 
 
 #: Points a kernel pass projects at once: the projection of a block runs as one branch-free,
-#: vectorised loop into per-thread scratch, then a second loop looks the block up and sums.
+#: vectorised loop into per-thread scratch, then :func:`_lookup_sum` reads, interpolates and
+#: sums the block in three passes.
 BLOCK = 256
 
 if HAVE_NUMBA:
