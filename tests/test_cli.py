@@ -13,7 +13,7 @@ from paretocal.cli import main
 from paretocal.geometry import pose_error
 from paretocal.io import read_extrinsic
 
-from .helpers import write_generic
+from .helpers import PROGRESS_LINE, write_generic
 
 FAST = ["--pop", "16", "--gens", "3", "--frames", "0:2", "--no-polish"]
 
@@ -40,6 +40,17 @@ class TestCalibrate:
                                  "--pop", "16", "--gens", "3", "--frames", "0:2", "--seed", "1")
         assert code == 0, err
         assert "chosen n =" in stdout and "error vs reference" in stdout
+        # stderr is not a terminal here: one line per stage as it begins, with the time since
+        # the start; no bars.
+        stages = [line.split(" s  ", 1) for line in err.splitlines() if PROGRESS_LINE.match(line)]
+        assert [text for _, text in stages] == [
+            "loading the frames", "locating the LiDAR", "recovering the LiDAR rings",
+            "compensating the motion", "extracting features (2 frames)", "scoring the seed grid",
+            "searching (3 NSGA-II generations)", "polishing the front", "choosing the solution",
+            "gathering the verdict's evidence", "writing the results"], err
+        times = [float(t.split()[-1]) for t, _ in stages]
+        assert times == sorted(times)
+        assert "\x1b" not in err                                # no terminal control codes
         for name in ("result.json", "pareto.csv", "extrinsic.yaml", "pareto.png",
                      "overlay_before.png", "overlay_after.png", "overlay_reference.png"):
             assert (out / name).stat().st_size > 0, name
@@ -79,9 +90,9 @@ class TestCalibrate:
     def test_strict_exits_3_on_an_unreliable_result(self, tmp_path, raw_date, init_file,
                                                     capsys):
         out = tmp_path / "s"
-        code, stdout, _ = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
-                               *FAST, "--no-figures", "--strict")
-        assert code == 3
+        code, stdout, err = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out",
+                                 out, *FAST, "--no-figures", "--strict", "--quiet")
+        assert code == 3 and err == ""                           # --quiet: no progress lines
         assert "verdict UNRELIABLE" in stdout.strip().splitlines()[-1]
         doc = json.loads((out / "result.json").read_text())   # written all the same
         assert doc["reliability"]["verdict"] == "unreliable"

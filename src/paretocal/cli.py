@@ -81,17 +81,35 @@ def _setup_logging(verbose: bool, quiet: bool) -> None:
 
 
 class _Progress:
-    """Rich progress bars on a terminal; nothing otherwise."""
+    """A command's progress on stderr: rich bars on a terminal; on anything else (a pipe, a log
+    file, CI) one line per stage as it begins, with the time since the command started, so
+    that a long run shows where it is; nothing with ``--quiet``.
+
+    Called as ``progress(stage, done, total)``. The pipeline's phases without a count of
+    their own (``paretocal.pipeline.PHASES``: loading, locating the LiDAR, ...) report
+    ``(phase, 0, 1)`` and ``(phase, 1, 1)``: a line each, no bar."""
 
     LABELS = {"features": "features", "search": "NSGA-II generations", "polish": "polish"}
+    #: What the line of a counted stage says, ``{total}`` its count.
+    LINES = {"features": "extracting features ({total} frames)",
+             "search": "searching ({total} NSGA-II generations)",
+             "polish": "polishing the front",
+             "check": "checking the extrinsic", "depth maps": "writing {total} depth maps",
+             "frames": "writing the frames ({total} files)",
+             "entries": "running {total} entries"}
 
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
+    def __init__(self, quiet: bool, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.mode = None if quiet else "bars" if self.stream.isatty() else "lines"
         self.bar = None
         self.tasks = {}
+        self.stage = None
 
     def __enter__(self):
-        if self.enabled:
+        import time
+
+        self.t0 = time.perf_counter()
+        if self.mode == "bars":
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn)
             self.bar = Progress(TextColumn("{task.description:<22}"), BarColumn(),
@@ -100,15 +118,35 @@ class _Progress:
         return self
 
     def __call__(self, stage: str, done: int, total: int) -> None:
-        if self.bar is None:
+        if self.mode == "lines":
+            self._line(stage, total)
+        if self.bar is None or (stage not in self.LABELS and stage in _phases()):
             return
         if stage not in self.tasks:
             self.tasks[stage] = self.bar.add_task(self.LABELS.get(stage, stage), total=total)
         self.bar.update(self.tasks[stage], completed=done, total=total)
 
+    def _line(self, stage: str, total: int) -> None:
+        """One line when a new stage begins (a stage reports many times)."""
+        import time
+
+        if stage == self.stage:
+            return
+        self.stage = stage
+        text = self.LINES.get(stage) or _phases().get(stage) or stage
+        print(f"paretocal: {time.perf_counter() - self.t0:7.1f} s  {text.format(total=total)}",
+              file=self.stream, flush=True)
+
     def __exit__(self, *exc):
         if self.bar is not None:
             self.bar.__exit__(*exc)
+
+
+def _phases() -> dict:
+    """The pipeline's phases and what the run does in each (``paretocal.pipeline.PHASES``)."""
+    from .pipeline import PHASES
+
+    return PHASES
 
 
 def _dataset_options(settings, source, take_init_error: bool):
@@ -327,7 +365,6 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     settings.validate()
     check_output_dir(out)
     T_inits = {camera: read_init(init, source, None)} if init is not None else None
-    interactive = sys.stderr.isatty() and not quiet
     unreliable = []
 
     def said(name, result):
@@ -340,7 +377,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
             unreliable.append(name)
 
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
                                     checkpoint_every, progress, on_camera=said)
@@ -362,9 +399,8 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     from .errors import Interrupted
     from .rundir import calibrate_run, resume_run
 
-    interactive = sys.stderr.isatty() and not quiet
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             if resume:
                 result = resume_run(out, checkpoint_every, progress=progress)
             else:
@@ -517,7 +553,7 @@ def check(
     settings = load_settings(config)
     T = read_init(extrinsic, source, camera)
     loaded = load_frames(source, frames, camera)
-    with _Progress(sys.stderr.isatty() and not quiet) as progress:
+    with _Progress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
     if out is not None:
         atomic_write_text(out, json.dumps(r, indent=2) + "\n")
@@ -570,8 +606,7 @@ def study(
                                    else settings.camera)
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
-    interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
+    with _Progress(quiet) as progress:
         doc = run_study(loaded, out, T_init, settings, plan, progress=progress)
     cal = doc["calibration"]
     rb = doc["robustness"]
@@ -608,8 +643,7 @@ def depth(
     T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
-    interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
+    with _Progress(quiet) as progress:
         for k, f in enumerate(loaded):
             write_depth(f, T, out, max_depth=max_depth)
             progress("depth maps", k + 1, len(loaded))
@@ -650,7 +684,7 @@ def extract(
     entries = _calib_entries(calib) if calib is not None else {}
     if init is not None:
         entries["T_cam_lidar"] = read_extrinsic(init)
-    with _Progress(sys.stderr.isatty() and not quiet) as progress:
+    with _Progress(quiet) as progress:
         r = extract_bag(bag, out, image_topic, cloud_topic, camera_info_topic, max_dt=max_dt,
                         every=every, limit=limit, calib=entries, progress=progress)
     c, dt = r["counts"], r["dt_ms"]
@@ -727,9 +761,8 @@ def batch(
     check_output_dir(out)
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
-    interactive = sys.stderr.isatty() and not quiet
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
                           progress=lambda d, t: progress("entries", d, t))
     except BatchInterrupted as exc:

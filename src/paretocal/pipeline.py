@@ -51,8 +51,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
     settings : Settings, optional
     progress : callable, optional
-        ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``
-        (the polish reports its passes: the first, and the one after re-selecting points).
+        ``progress(stage, done, total)`` for ``stage`` in ``features`` (frames), ``search``
+        (generations), ``polish`` (its passes: the first, and the one after re-selecting
+        points), each from ``done = 0`` as it begins; and ``(phase, 0, 1)`` as each other
+        phase of :data:`PHASES` begins, ``(phase, 1, 1)`` as it ends.
     checkpoint : Checkpoint, optional
         Save the search every few generations and resume from a saved state of the same run
         (see :mod:`paretocal.search.checkpoint`); an interrupt during the search raises
@@ -70,7 +72,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     report = _reporter(progress)
-    with _timed(timings, "load"):
+    with _timed(timings, "load", progress):
         frames = _load(source, settings)
     check_population_memory(settings.search.pop, len(frames))
     T_init, T_ref = resolve_init(frames, T_init)
@@ -81,14 +83,16 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         frames = lidar.for_camera(frames)
         lidar_info, rings, motion_info = lidar.lidar_info, lidar.rings, lidar.motion_info
     else:
-        with _timed(timings, "lidar_pose"):
+        with _timed(timings, "lidar_pose", progress):
             frames, lidar_info, first_rings = locate_lidar(frames, settings)
-        with _timed(timings, "rings"):
+        with _timed(timings, "rings", progress):
             # Rings from the sweeps as recorded (each return on its laser's cone about the
             # sensor); everything else from the sweeps de-skewed to the image time.
             rings = sweep_rings(frames, settings, first_rings)
-        with _timed(timings, "motion"):
+        with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
+    if progress is not None:
+        progress("features", 0, len(frames))
     with _timed(timings, "features"):
         # A resumed run decides with the cost model the interrupted run measured.
         stored = checkpoint.stored_cost_model() if checkpoint is not None else None
@@ -99,11 +103,11 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
         _check_budget(stage, settings.decision)
-    res, seeds = _search(stage, frames, T_init, settings, checkpoint, report, timings)
+    res, seeds = _search(stage, frames, T_init, settings, checkpoint, progress, timings)
     try:
         stage, X, F, basin, evaluations = _refine(stage, res, frames, rings, T_init, settings,
                                                   progress, timings)
-        with _timed(timings, "decision"):
+        with _timed(timings, "decision", progress):
             T, columns, costs, best = front_columns(stage, X, F, T_init, T_ref, settings)
             d = settings.decision
             i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
@@ -116,7 +120,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                 stage.scene, get_evaluator(settings.objective.evaluator), T[i],
                 decision["n_points"])
             quality = quality_report(stage.objective, X[i])
-        with _timed(timings, "verdict"):
+        with _timed(timings, "verdict", progress):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
                                        X[i], quality)
     except Interrupted as exc:
@@ -144,17 +148,23 @@ PHASES = {"load": "loading the frames", "lidar_pose": "locating the LiDAR",
           "rings": "recovering the LiDAR rings", "motion": "compensating the motion",
           "features": "extracting features", "seed_grid": "scoring the seed grid",
           "polish": "polishing the front", "reselect": "re-selecting the points at the estimate",
-          "decision": "choosing the solution", "verdict": "gathering the verdict's evidence"}
+          "decision": "choosing the solution", "verdict": "gathering the verdict's evidence",
+          "writing": "writing the results"}
 
 
 @contextmanager
-def _timed(timings: dict[str, float], name: str):
+def _timed(timings: dict[str, float], name: str, progress=None):
     """Add the wall time of the block to ``timings[name]`` (s); an interrupt in the block
-    becomes :class:`~paretocal.errors.Interrupted` naming the phase."""
+    becomes :class:`~paretocal.errors.Interrupted` naming the phase. ``progress``, when given,
+    is told ``(name, 0, 1)`` as the block begins and ``(name, 1, 1)`` when it is done."""
     t0 = time.perf_counter()
     try:
         STOP.check()
+        if progress is not None:
+            progress(name, 0, 1)
         yield
+        if progress is not None:
+            progress(name, 1, 1)
         STOP.check()
     except KeyboardInterrupt:
         STOP.clear()                              # taken
@@ -190,11 +200,11 @@ def _check_budget(stage: Stage, d) -> None:
 
 
 def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Settings,
-            checkpoint: Checkpoint | None, report, timings: dict):
+            checkpoint: Checkpoint | None, progress, timings: dict):
     """The seed grid and NSGA-II over the stage's objective: ``(SearchResult, seeds)``."""
     seeds = None
     if settings.search.seed_grid_deg:
-        with _timed(timings, "seed_grid"):
+        with _timed(timings, "seed_grid", progress):
             seeds = coarse_seeds(stage.feats, T_init, settings.search, settings.objective,
                                  settings.features.z_min, stage.cost, stage.n_max)
     if checkpoint is not None:
@@ -206,8 +216,10 @@ def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Set
             searched, T_init, stage.n_min, stage.n_max,
             [(f.name, len(f.points), list(f.image.shape)) for f in frames],
             seeds if seeds is not None else np.zeros(0))
+    if progress is not None:
+        progress("search", 0, settings.search.gens)
     res = run_nsga2(stage.objective, settings.search, stage.n_min, stage.n_max,
-                    report("search"), seeds=seeds, checkpoint=checkpoint)
+                    _reporter(progress)("search"), seeds=seeds, checkpoint=checkpoint)
     timings["search"] = res.wall_s
     timings["search_objective"] = res.objective_s
     return res, seeds

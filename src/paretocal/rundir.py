@@ -185,6 +185,8 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
                                lidar=lidar)
             try:
+                if progress is not None:
+                    progress("writing", 0, 1)
                 publish_run(result, out, result.sweeps or frames, figures=figures)
             except KeyboardInterrupt:
                 raise Interrupted("writing the results", result.history[-1]["gen"],
