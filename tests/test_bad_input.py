@@ -923,3 +923,14 @@ def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
         expect=(f"{path}: point cloud file not reachable: a symbolic link to "
                 f"{tmp_path / 'moved.bin'}, which does not exist"))
+
+
+# --- results and commands ---------------------------------------------------------------------
+
+def test_check_without_an_extrinsic_on_a_dataset_without_one(capfd, tmp_path, raw_frames):
+    """``check`` takes the dataset's own extrinsic by default; a folder whose calib.yaml has
+    none exits 2 saying to pass --extrinsic, before any feature is computed."""
+    folder = write_generic(tmp_path / "noT", raw_frames[:1], with_T=False)
+    bad(capfd, "check", folder,
+        expect=(f"{folder}: the dataset has no extrinsic of its own (T_cam_lidar in "
+                "calib.yaml); pass --extrinsic FILE"))

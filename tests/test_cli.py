@@ -206,6 +206,18 @@ class TestCheck:
         assert doc["weak"] and "only 2 frame(s)" in doc["notes"][0]
         assert stdout.strip().splitlines()[-1].startswith("paretocal: WEAK CHECK: only 2 frame")
 
+    def test_without_extrinsic_the_datasets_own_is_checked(self, tmp_path, raw_date, capsys):
+        from paretocal.io import detect_source
+
+        out = tmp_path / "check.json"
+        code, stdout, err = _run(capsys, "check", raw_date, "--frames", "0:2", "--out", out,
+                                 "--quiet")
+        assert code == 0, err
+        doc = json.loads(out.read_text())
+        assert doc["extrinsic_from"] == "dataset"
+        np.testing.assert_array_equal(doc["T_checked"], detect_source(raw_date).frames[0].T_ref)
+        assert stdout.startswith("paretocal: the dataset's own extrinsic: ")
+
     def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
         code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")
         assert code == 2 and "none.yaml: file not found" in err

@@ -34,7 +34,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     dict
         ``verdict`` ("calibrated" or "miscalibrated"), ``score`` (the move to the local optimum
         relative to the tolerances; above 1 is miscalibrated), ``moved`` (deg, cm, px),
-        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_local_optimum``, the
+        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_checked`` (``T``),
+        ``T_local_optimum``, the
         ``quality`` report at the local optimum, and ``weak`` with ``notes``: True when the
         check itself has too little to go on (fewer frames than a calibration needs to be
         trusted), with what to do.
@@ -80,6 +81,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "neighbour_fraction": frac,
         "best_neighbour_gain_px": gain,
         "neighbour_step": {"translation_cm": 5.0, "rotation_deg": 0.5},
+        "T_checked": T.tolist(),
         "T_local_optimum": T_opt.tolist(),
         "quality": quality,
         "frames": [f.name for f in frames],

@@ -526,8 +526,8 @@ def _check_perturbation(rot: float, trans: float) -> None:
 @app.command()
 def check(
     source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
-    extrinsic: Annotated[Path, typer.Option(help="Extrinsic to check (YAML/JSON with "
-                                                 "T_cam_lidar).")],
+    extrinsic: Annotated[Optional[Path], typer.Option(
+        help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
     camera: Camera = 2,
     out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
@@ -537,7 +537,8 @@ def check(
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
-    """Say whether EXTRINSIC is calibrated for SOURCE, without ground truth."""
+    """Say whether an extrinsic (--extrinsic, or the dataset's own) is calibrated for SOURCE,
+    without ground truth."""
     import json
 
     from .check import check_extrinsic
@@ -551,16 +552,23 @@ def check(
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
-    T = read_init(extrinsic, source, camera)
+    T = read_init(extrinsic, source, camera) if extrinsic is not None else None
     loaded = load_frames(source, frames, camera)
+    if T is None:
+        T = loaded[0].T_ref
+        if T is None:
+            raise ParetocalError(f"{source}: the dataset has no extrinsic of its own "
+                                 "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
     with _Progress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
+    r["extrinsic_from"] = str(extrinsic) if extrinsic is not None else "dataset"
     if out is not None:
         atomic_write_text(out, json.dumps(r, indent=2) + "\n")
     m = r["moved"]
-    typer.echo(f"paretocal: {r['verdict'].upper()} (score {r['score']:.2f}; the local optimum is "
-               f"{m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / {m['pixels']:.1f} px "
-               f"away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+    which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
+    typer.echo(f"paretocal: {which}: {r['verdict'].upper()} (score {r['score']:.2f}; the local "
+               f"optimum is {m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / "
+               f"{m['pixels']:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
                f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
     for note in r["notes"]:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
