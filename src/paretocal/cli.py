@@ -664,10 +664,12 @@ def extract(
                                              "folder.")],
     out: Annotated[Path, typer.Option("--out", help="Folder to create (the generic layout: "
                                                     "calib.yaml, images/, points/).")],
-    image_topic: Annotated[str, typer.Option(
-        "--image-topic", help="sensor_msgs/Image or CompressedImage (JPEG, PNG) topic.")],
-    cloud_topic: Annotated[str, typer.Option("--cloud-topic",
-                                             help="sensor_msgs/PointCloud2 topic.")],
+    image_topic: Annotated[Optional[str], typer.Option(
+        "--image-topic", help="sensor_msgs/Image or CompressedImage (JPEG, PNG) topic; "
+                              "default: the bag's only one.")] = None,
+    cloud_topic: Annotated[Optional[str], typer.Option(
+        "--cloud-topic", help="sensor_msgs/PointCloud2 topic; default: the bag's only "
+                              "one.")] = None,
     camera_info_topic: Annotated[Optional[str], typer.Option(
         "--camera-info-topic", help="sensor_msgs/CameraInfo topic; default: the one beside "
                                     "the image topic, or the bag's only one.")] = None,
@@ -684,11 +686,23 @@ def extract(
     quiet: Quiet = False,
 ) -> None:
     """Extract image-cloud pairs from a ROS bag into a generic folder (calib.yaml, images/,
-    points/, extract.json) that calibrate, check, depth and study read."""
-    from .extract import REPORT, extract_bag
+    points/, extract.json) that calibrate, check, depth and study read.
+
+    Without --image-topic or --cloud-topic, the bag's only image topic and only PointCloud2
+    topic are used; when there are several, the topics are listed and the command exits 2."""
+    from .extract import REPORT, choose_topics, extract_bag
     from .io import read_extrinsic
 
     _setup_logging(verbose, quiet)
+    if image_topic is None or cloud_topic is None:
+        pick = choose_topics(bag, image_topic, cloud_topic)
+        if pick.image_topic is None or pick.cloud_topic is None:
+            typer.echo(f"paretocal: the topics of {bag}:\n{pick.listing}")
+            raise ParetocalError(pick.missing(bag))
+        typer.echo(f"paretocal: using {' and '.join(pick.chosen)} (the bag's only "
+                   f"{'topic' if len(pick.chosen) == 1 else 'topics'} of "
+                   f"{'that kind' if len(pick.chosen) == 1 else 'those kinds'})")
+        image_topic, cloud_topic = pick.image_topic, pick.cloud_topic
     entries = _calib_entries(calib) if calib is not None else {}
     if init is not None:
         entries["T_cam_lidar"] = read_extrinsic(init)
