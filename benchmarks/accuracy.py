@@ -88,7 +88,10 @@ DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
 DATE = DATA / "kitti_raw" / "2011_09_26"
 OBJECT = DATA / "kitti_object" / "training"
-AXES = ("yaw_deg", "pitch_deg", "roll_deg", "x_cm", "y_cm", "z_cm")
+#: Per-axis errors (paretocal.geometry.pose_error): the correction's axes (translation in the
+#: LiDAR frame, those of the verdict's intervals), then the translation in the camera frame.
+AXES = ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg", "pitch_deg", "roll_deg",
+        "x_cam_cm", "y_cam_cm", "z_cam_cm")
 #: A result is "off" beyond either limit (the verdict's honesty figures).
 OFF_DEG, OFF_CM = 1.0, 10.0
 

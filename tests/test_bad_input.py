@@ -646,6 +646,7 @@ def test_a_normal_short_run_is_ok(tmp_path, rig3, perturbed_init):
     assert set(rel) >= {"verdict", "reasons", "frames", "in_view", "at_bound"}
     assert rel["frames"] == 3 and 0 < rel["in_view"] <= 1
     assert rel["verdict"] == "ok", rel["reasons"]
+    assert rel["intervals"]["frame"] == "lidar" and rel["intervals_not_trusted"] is None
     assert doc["reference_error"]["rotation_deg"] < 1.0      # and it is indeed close
 
 
@@ -727,6 +728,21 @@ def test_reliability_reasons(over, reason):
         assert rel["verdict"] == "unreliable" and len(rel["reasons"]) == 1, rel
         assert reason in rel["reasons"][0], rel["reasons"]
     json.dumps(rel, allow_nan=False)                     # plain JSON
+
+
+@pytest.mark.parametrize("over, ok", [({}, True), ({"frames": ["a", "b"]}, False)])
+def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
+    """An unreliable result's intervals are not what they claim (a wrong basin, frames that
+    disagree): result.json keeps them under ``intervals_not_trusted`` and the console says
+    none."""
+    from paretocal.verdict import interval_text, reliability
+
+    iv = {"frame": "lidar", "units": {"x": "cm"}, "half_width": {"x": 1.5}, "undetermined": []}
+    rel = reliability(_fake_result(evidence={"intervals": iv}, **over))
+    assert rel["verdict"] == ("ok" if ok else "unreliable")
+    assert rel["intervals"] == (iv if ok else None)
+    assert rel["intervals_not_trusted"] == (None if ok else iv)
+    assert interval_text(rel) == ("x +-1.5 cm" if ok else None)
 
 
 # --- a very large cloud ---------------------------------------------------------------------------

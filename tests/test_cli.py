@@ -10,8 +10,9 @@ import pytest
 import yaml
 
 from paretocal.cli import main
-from paretocal.geometry import pose_error
+from paretocal.geometry import correction_params, invert, pose_error
 from paretocal.io import read_extrinsic
+from paretocal.quality import TO_REPORT
 
 from .helpers import PROGRESS_LINE, write_generic
 
@@ -64,12 +65,32 @@ class TestCalibrate:
         e1 = pose_error(np.array(doc["T_cam_lidar"]), ref)
         assert doc["reference_error"]["translation_cm"] == pytest.approx(
             float(e1["translation_cm"]))
+        # Every x, y, z says its frame: the per-axis errors in the LiDAR frame (the
+        # correction's and the intervals' axes) are the correction from the reference to the
+        # result; the camera frame's are named so.
+        err_ref = doc["reference_error"]
+        lidar = [err_ref[k] for k in ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg",
+                                      "pitch_deg", "roll_deg")]
+        np.testing.assert_allclose(
+            lidar, correction_params(invert(ref) @ np.array(doc["T_cam_lidar"])) * TO_REPORT,
+            atol=1e-9)
+        assert {"x_cam_cm", "y_cam_cm", "z_cam_cm"} <= set(err_ref) and "x_cm" not in err_ref
+        assert doc["correction_frame"] == doc["quality"]["frame"] == "lidar"
+        line = next(x for x in stdout.splitlines() if "per axis (LiDAR frame)" in x)
+        assert line.startswith("paretocal: error vs reference per axis (LiDAR frame): x ")
+        assert f"z {err_ref['z_lidar_cm']:+.3g} cm" in line and line.endswith(" deg")
+        # Two frames: judged unreliable, so no intervals on the console or in result.json
+        # (they are kept under a name that says so).
+        assert doc["reliability"]["verdict"] == "unreliable"
+        assert "95 % intervals" not in stdout and doc["reliability"]["intervals"] is None
+        assert doc["reliability"]["intervals_not_trusted"]["frame"] == "lidar"
         T = read_extrinsic(out / "extrinsic.yaml")
         np.testing.assert_allclose(T, doc["T_cam_lidar"], atol=1e-8)
         rows = (out / "pareto.csv").read_text().splitlines()
         header = rows[0].split(",")
         for col in ("x", "y", "z", "yaw", "pitch", "roll", "n", "chamfer", "cost", "ms", "bytes",
-                    "ref_rotation_deg", "ref_translation_cm", "chosen"):
+                    "ref_rotation_deg", "ref_translation_cm", "ref_x_lidar_cm", "ref_x_cam_cm",
+                    "chosen"):
             assert col in header
         assert sum(r.endswith(",1") for r in rows[1:]) == 1
         assert not list(out.glob(".*tmp*"))                     # no temporary files left

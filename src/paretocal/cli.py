@@ -219,6 +219,13 @@ def _fmt_err(e: dict | None) -> str:
     return f"{e['rotation_deg']:.3f} deg / {e['translation_cm']:.2f} cm"
 
 
+def _fmt_axes(e: dict) -> str:
+    """The per-axis errors of :func:`paretocal.geometry.pose_error` in the LiDAR frame (the
+    correction's axes, those of the intervals): ``"x +0.47 cm, ..., roll -0.03 deg"``."""
+    keys = ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg", "pitch_deg", "roll_deg")
+    return ", ".join(f"{k.split('_')[0]} {e[k]:+.3g} {k.rsplit('_', 1)[1]}" for k in keys)
+
+
 @app.command()
 def calibrate(
     source: Annotated[Optional[Path], typer.Argument(
@@ -420,9 +427,11 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"wrote {out}")
     from .verdict import interval_text
 
-    intervals = interval_text(result.reliability)
+    if ref is not None:
+        typer.echo(f"paretocal: error vs reference per axis (LiDAR frame): {_fmt_axes(ref)}")
+    intervals = interval_text(result.reliability)         # only for a result judged ok
     if intervals:
-        typer.echo(f"paretocal: 95 % intervals of the correction: {intervals}")
+        typer.echo(f"paretocal: 95 % intervals per axis (LiDAR frame): {intervals}")
     typer.echo(verdict_line(result.reliability))
     if strict and result.reliability["verdict"] != "ok":
         raise typer.Exit(STRICT_EXIT)

@@ -60,9 +60,10 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
 
     Returns
     -------
-    dict, ready for JSON: ``curvature`` per axis, ``tolerance_0p01`` per axis, ``flattest``
-    direction, ``jackknife_se`` per axis, ``frame_steps`` (each frame's Newton step), and
-    ``well_observed`` per axis.
+    dict, ready for JSON: ``frame`` (``"lidar"``: every per-axis figure is on the
+    correction's axes, translation in the LiDAR frame), ``curvature`` per axis,
+    ``tolerance_0p01`` per axis, ``flattest`` direction, ``jackknife_se`` per axis,
+    ``frame_steps`` (each frame's Newton step), and ``well_observed`` per axis.
     """
     x = at_every_point(objective, x)
     S = fd_stencil(h)
@@ -92,6 +93,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
         return {a: float(val) for a, val in zip(AXES, v * TO_REPORT)}
 
     return {
+        "frame": "lidar",                     # the per-axis figures are the correction's axes
         "units": dict(zip(AXES, UNITS)),
         "frames": int(F),
         "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)

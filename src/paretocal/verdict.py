@@ -250,7 +250,7 @@ def intervals(quality: dict, res_per_px: np.ndarray, search: SearchSettings) -> 
     s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
-    return {"units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
+    return {"frame": "lidar", "units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
             "half_width": {a: (round(float(h), 4) if k else None)
                            for a, h, k in zip(AXES, half, ok)},
             "determined": {a: bool(k) for a, k in zip(AXES, ok)},
@@ -391,10 +391,13 @@ def reliability(result: "CalibrationResult") -> dict:
                        "belongs to its cloud (same time, same camera), the intrinsics, and "
                        "that the scenes have edges both sensors see")
     iv = ev.get("intervals")
+    # Intervals hold only where nothing else casts doubt on the result: a wrong basin, frames
+    # that disagree or a result at a bound are all errors the intervals do not measure.
     return {
         "verdict": "unreliable" if reasons else "ok",
         "reasons": reasons,
-        "intervals": iv,
+        "intervals": None if reasons else iv,
+        "intervals_not_trusted": iv if reasons else None,
         "evidence": {k: v for k, v in ev.items() if k != "intervals"} or None,
         "frames": n_frames,
         "in_view": None if in_view is None else round(float(in_view), 4),
