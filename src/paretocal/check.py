@@ -16,7 +16,8 @@ import numpy as np
 from .config import Settings
 from .geometry import pose_error
 from .io.frame import Frame
-from .quality import displacement_px, local_optimum, neighbour_fraction, quality_report
+from .quality import (displacement_px, local_optimum, neighbour_fraction, pixel_fd_step,
+                      quality_report)
 
 NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
 
@@ -62,7 +63,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
              "translation_cm": float(move["translation_cm"]),
              "pixels": displacement_px(obj, x0, xo)}
     score = max(moved["rotation_deg"] / rot_tol_deg, moved["translation_cm"] / trans_tol_cm)
-    quality = quality_report(obj, xo)
+    quality = quality_report(obj, xo, pixel_fd_step(obj, xo))
     tick("check", 3, 3)
     from .pipeline import RELIABLE_MIN_FRAMES
 

@@ -20,7 +20,7 @@ from .features.lidar import GROUP_NAMES
 from .geometry import pose_error
 from .io.frame import Frame
 from .io.layouts import load_frames
-from .quality import quality_report
+from .quality import at_every_point, pixel_fd_step, quality_report
 from .search import coarse_seeds, polish_front, run_nsga2
 from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
@@ -119,7 +119,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             decision["measured_ms"] = time_per_candidate(
                 stage.scene, get_evaluator(settings.objective.evaluator), T[i],
                 decision["n_points"])
-            quality = quality_report(stage.objective, X[i])
+            quality = quality_report(stage.objective, X[i],
+                                     pixel_fd_step(stage.objective, at_every_point(
+                                         stage.objective, X[i])))
         with _timed(timings, "verdict", progress):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
                                        X[i], quality)

@@ -26,6 +26,19 @@ AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
 TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for display
 
+#: Finite-difference step of the run's quality report, in pixels: each axis is stepped by the
+#: change that moves the projected feature points by this much on average. The objective reads
+#: distance transforms of pixel-quantised edges, so differences over steps of about a pixel
+#: measure that quantisation rather than the objective's shape: with the fixed 1 cm / 0.1 deg
+#: steps (0.4-1.5 px on KITTI) one frame more or less changed the Hessian so much that the
+#: jackknife standard errors came out 3-30 times their value with steps of two pixels (z 10 cm
+#: for a result 1.1 cm off), where they settle (the same within 2x at 2, 3 and 4 times the
+#: fixed steps).
+FD_STEP_PX = 2.0
+#: ... and never beyond ten fixed steps (10 cm, 1 deg): an axis that hardly moves the points
+#: is not determined, whatever the step.
+MAX_FD_STEP = 10.0 * DEFAULT_FD_STEP
+
 
 def _derivatives(values: np.ndarray, h: np.ndarray):
     """Gradient (6,) and Hessian (6, 6) from the 28 stencil values of one candidate."""
@@ -56,13 +69,14 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     x : ndarray, shape (7,)
         The solution ``[x, y, z, yaw, pitch, roll, n]``; evaluated with every point.
     h : ndarray, shape (6,)
-        Finite-difference steps (m, deg).
+        Finite-difference steps (m, deg); a run uses :func:`pixel_fd_step`.
 
     Returns
     -------
     dict, ready for JSON: ``frame`` (``"lidar"``: every per-axis figure is on the
     correction's axes, translation in the LiDAR frame), ``curvature`` per axis,
-    ``tolerance_0p01`` per axis, ``flattest`` direction, ``jackknife_se`` per axis,
+    ``fd_step`` (``h``), ``tolerance_0p01`` per axis, ``flattest`` direction, ``jackknife_se``
+    per axis,
     ``frame_steps`` (each frame's Newton step), and ``well_observed`` per axis.
     """
     x = at_every_point(objective, x)
@@ -96,6 +110,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
         "frame": "lidar",                     # the per-axis figures are the correction's axes
         "units": dict(zip(AXES, UNITS)),
         "frames": int(F),
+        "fd_step": per_axis(np.asarray(h, dtype=np.float64)),
         "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)
                                    for i, (a, c) in enumerate(zip(AXES, curv))},
         "tolerance_0p01px": per_axis(tol),
@@ -107,6 +122,27 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
         "well_observed": {a: bool(np.isfinite(v) and v < (3.0 if u == "cm" else 0.2))
                           for a, v, u in zip(AXES, se * TO_REPORT, UNITS)},
     }
+
+
+def axis_resolution(objective, x: np.ndarray) -> np.ndarray:
+    """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
+    pixel on average at ``x`` (7,), the other axes held; inf for an axis that does not move
+    them."""
+    probe = np.r_[[0.01] * 3, [0.1] * 3]
+    out = np.empty(6)
+    for a in range(6):
+        y = np.array(x, dtype=np.float64, copy=True)
+        y[a] += probe[a]
+        px = displacement_px(objective, x, y)
+        out[a] = probe[a] / px if px > 0 else np.inf
+    return out
+
+
+def pixel_fd_step(objective, x: np.ndarray) -> np.ndarray:
+    """Finite-difference steps (6,) in m and deg for the quality report at ``x`` (7,): the
+    change of each axis that moves the points by :data:`FD_STEP_PX` pixels, at most
+    :data:`MAX_FD_STEP`."""
+    return np.minimum(FD_STEP_PX * axis_resolution(objective, x), MAX_FD_STEP)
 
 
 def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[float, float]:
@@ -155,5 +191,6 @@ def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
     return correction_params(invert(T_from) @ T_to)
 
 
-__all__ = ["AXES", "at_every_point", "correction_between", "correction_matrix", "displacement_px",
-           "local_optimum", "neighbour_fraction", "quality_report"]
+__all__ = ["AXES", "at_every_point", "axis_resolution", "correction_between", "correction_matrix",
+           "displacement_px", "local_optimum", "neighbour_fraction", "pixel_fd_step",
+           "quality_report"]
