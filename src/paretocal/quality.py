@@ -6,9 +6,9 @@ around the extrinsic (28 candidates), read frame by frame:
 * **curvature per degree of freedom**: the Hessian of the objective (px per cm^2 or deg^2); the
   displacement along each axis that raises the objective by 0.01 px; and the flattest direction,
   the combination of axes the scene constrains least.
-* **agreement across frames**: a Newton step from the extrinsic on each leave-one-frame-out
-  objective gives F nearly independent estimates of the optimum; their jackknife spread is the
-  standard error of each axis (deg, cm), and each frame's own step says which frames disagree.
+* **agreement across frames**: the jackknife standard error of each axis (deg, cm), linearised
+  (each frame's gradient through the mean objective's Hessian); and each frame's own Newton
+  step, which says which frames disagree.
 * **miscalibration check** (after Levinson & Thrun, RSS 2013): a correct extrinsic is a local
   minimum of the objective, so few of its grid neighbours score better; and the local optimum
   found from it lies within a pixel or two of it. The verdict uses the pixel displacement of the
@@ -22,6 +22,10 @@ import numpy as np
 from .geometry import correction_matrix
 from .search.polish import DEFAULT_FD_STEP, fd_stencil, newton_step, stencil_derivatives
 
+#: The Newton steps' floor on the Hessian's eigenvalues, relative to the largest
+#: (:func:`paretocal.search.polish.newton_step`'s default).
+EIG_FLOOR = 1e-3
+
 AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
 TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for display
@@ -30,10 +34,9 @@ TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for displ
 #: change that moves the projected feature points by this much on average. The objective reads
 #: distance transforms of pixel-quantised edges, so differences over steps of about a pixel
 #: measure that quantisation rather than the objective's shape: with the fixed 1 cm / 0.1 deg
-#: steps (0.4-1.5 px on KITTI) one frame more or less changed the Hessian so much that the
-#: jackknife standard errors came out 3-30 times their value with steps of two pixels (z 10 cm
-#: for a result 1.1 cm off), where they settle (the same within 2x at 2, 3 and 4 times the
-#: fixed steps).
+#: steps (0.4-1.5 px on KITTI) the jackknife standard errors came out up to 10-50 times their
+#: value with larger steps (z 10 cm for a result 1.1 cm off); from 2 to 8 times the fixed
+#: steps they agree within a factor of 2 (14 KITTI results).
 FD_STEP_PX = 2.0
 #: ... and never beyond ten fixed steps (10 cm, 1 deg): an axis that hardly moves the points
 #: is not determined, whatever the step.
@@ -49,6 +52,32 @@ def _derivatives(values: np.ndarray, h: np.ndarray):
 def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float = 10.0):
     """Step (6,) in m and deg to the minimum of the local quadratic (|eigenvalues| floored)."""
     return newton_step(g[None], H[None], h, max_units)[0]
+
+
+def _jackknife_se(per_frame: np.ndarray, H: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Jackknife standard errors (6,) in m and deg of the optimum of the mean over frames.
+
+    Linearised (the infinitesimal jackknife): leaving frame f out moves the optimum by
+    ``H^-1 (g_f - g_mean) / (F - 1)``, with ``g_f`` frame f's gradient (from the stencil
+    values ``per_frame`` (28, F)) and ``H`` (6, 6) the Hessian of the mean, so the variance is
+    ``H^-1 B H^-1`` with ``B = sum_f (g_f - g_mean)(g_f - g_mean)^T / (F (F - 1))``. A Newton
+    step on each leave-one-out objective, each with its own Hessian, gives the same where the
+    objective is well curved; but along its flattest direction (camera height against pitch,
+    hardly curved or slightly concave at the steps' scale) one frame more or less changes that
+    Hessian's smallest eigenvalue enough to scatter the steps: 2-10 times these errors, and more
+    the larger the steps. ``H``'s eigenvalues are taken in absolute value and floored as the
+    Newton steps do (:func:`paretocal.search.polish.newton_step`). NaN with one frame.
+    """
+    F = per_frame.shape[1]
+    if F < 2:
+        return np.full(6, np.nan)
+    _, G, _ = stencil_derivatives(per_frame.T, h)                      # (F, 6)
+    D = G - G.mean(axis=0)
+    B = D.T @ D / (F * (F - 1))
+    w, V = np.linalg.eigh(H * np.outer(h, h))                           # in units of h
+    w = np.maximum(np.abs(w), max(np.abs(w).max() * EIG_FLOOR, 1e-12))
+    Hi = (V / w) @ V.T * np.outer(h, h)
+    return np.sqrt(np.maximum(np.diag(Hi @ B @ Hi), 0.0))
 
 
 def at_every_point(objective, x: np.ndarray) -> np.ndarray:
@@ -92,15 +121,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     flat = V[:, 0] * h
     flat /= np.abs(flat / np.r_[[0.01] * 3, [0.1] * 3]).max()         # largest part 1 cm / 0.1 deg
     steps = np.array([_newton_step(*_derivatives(per_frame[:, f], h), h) for f in range(F)])
-    if F > 1:
-        loo = []
-        for f in range(F):
-            keep = np.arange(F) != f
-            loo.append(_newton_step(*_derivatives(per_frame[:, keep].mean(axis=1), h), h))
-        loo = np.array(loo)
-        se = np.sqrt((F - 1) / F * ((loo - loo.mean(axis=0)) ** 2).sum(axis=0))
-    else:
-        se = np.full(6, np.nan)
+    se = _jackknife_se(per_frame, H, h)
     full_step = _newton_step(g, H, h)
 
     def per_axis(v):
