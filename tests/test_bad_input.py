@@ -717,6 +717,14 @@ def _fake_result(**over):
     ({"evidence": {"contrast": {"frames_clear": 1.0, "z": 2.4}}},
      "images and clouds barely agree: the result fits the image edges only 2.4 spreads better"),
     ({"evidence": {"contrast": {"frames_clear": 0.95, "z": 5.0}}}, None),
+    # The jackknife of the intervals (at the local optimum) decides when there is one.
+    ({"quality": {"jackknife_se": {"x": 0.1, "y": 0.1, "z": 13.6, "yaw": 0.1, "pitch": 0.1,
+                                   "roll": 0.1}},
+      "evidence": {"intervals": {"units": {"x": "cm", "z": "cm", "roll": "deg"},
+                                 "jackknife_se": {"x": 0.3, "z": 0.7, "roll": None}}}}, None),
+    ({"evidence": {"intervals": {"units": {"x": "cm", "z": "cm"},
+                                 "jackknife_se": {"x": 0.3, "z": 11.0}}}},
+     "the frames disagree: jackknife standard error z 11 cm"),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.verdict import reliability
