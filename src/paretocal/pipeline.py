@@ -86,7 +86,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         with _timed(timings, "rings"):
             # Rings from the sweeps as recorded (each return on its laser's cone about the
             # sensor); everything else from the sweeps de-skewed to the image time.
-            rings = sweep_rings(frames, settings, first_rings)
+            rings = sweep_rings(frames, settings, first_rings, [(frames[0].camera, T_init)])
         with _timed(timings, "motion"):
             frames, motion_info = compensate_motion(frames, settings)
     with _timed(timings, "features"):

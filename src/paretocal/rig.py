@@ -99,7 +99,7 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         # an image of every selected frame).
         key = tuple((f.name, str(f.points_path)) for f in frames[name])
         if key not in steps:
-            steps[key] = prepare_lidar(frames[name], settings)
+            steps[key] = prepare_lidar(frames[name], settings, _views(frames, T_inits, key))
         try:
             results[name] = calibrate_run(source, out / name, T_inits.get(name), settings,
                                           frames=frames[name], figures=figures,
@@ -120,6 +120,17 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
     if len(results) > 1:
         atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
     return summary
+
+
+def _views(frames: dict, T_inits: dict, key: tuple) -> list:
+    """``(camera, initial extrinsic)`` of every camera whose frames are over the clouds
+    ``key``: the LiDAR steps done once for them judge the rings where any of them looks."""
+    views = []
+    for name, fr in frames.items():
+        T = T_inits.get(name, fr[0].T_ref)
+        if T is not None and tuple((f.name, str(f.points_path)) for f in fr) == key:
+            views.append((fr[0].camera, np.asarray(T, dtype=np.float64)))
+    return views
 
 
 def _err(T: np.ndarray, T_ref: np.ndarray) -> dict:

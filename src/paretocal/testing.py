@@ -7,7 +7,9 @@ clouds as other rigs record them, each with its exact truth:
 * fewer beams (every 2nd or 4th ring by elevation: 32 and 16 beams, 0.8 / 1.7 deg apart);
 * firing (column-major) order, as Velodyne/Hesai/Ouster drivers write it, and shuffled order;
 * stored in a vehicle frame, the sensor 1-2 m from the origin and slightly tilted;
-* per-point time as a 10 Hz spinning sensor would stamp it.
+* per-point time as a 10 Hz spinning sensor would stamp it;
+* motion-compensated into the frame of one instant while the vehicle drove and pitched
+  (returns then lie on their lasers' cones only near the azimuth scanned at that instant).
 """
 
 from __future__ import annotations
@@ -97,6 +99,26 @@ def to_vehicle_frame(v: Variant, pose: np.ndarray | None = None) -> Variant:
     xyz = transform_points(P, pts)
     out = np.column_stack([xyz, pts[:, 3]]).astype(np.float32)
     return Variant(out, v.ring.copy(), v.time.copy(), P @ v.sensor_pose)
+
+
+def compensated(v: Variant, speed_mps: float = 3.0, pitch_dps: float = 3.0,
+                azimuth_deg: float = 0.0) -> Variant:
+    """The sweep as a dataset stores it after motion compensation: every return moved into
+    the sensor's frame at the instant the sweep passed ``azimuth_deg`` (a camera's view),
+    while the sensor drove forward (x) at ``speed_mps`` and pitched at ``pitch_dps``. A return
+    recorded ``dt`` seconds from that instant moves by ``speed * dt`` and turns by
+    ``pitch * dt``: seen from the sensor's origin at the instant, it leaves its laser's cone
+    unless it was recorded near it."""
+    psi0 = np.radians(azimuth_deg)
+    # Signed sweep time from the instant, within half a revolution either way (0.1 s a turn).
+    dt = -(np.mod(azimuth(v.points) - psi0 + np.pi, 2 * np.pi) - np.pi) / (2 * np.pi) * 0.1
+    pts = v.points.astype(np.float64)
+    out = pts.copy()
+    for k in np.unique(np.round(dt, 4)):                 # one rigid motion per 0.1 ms
+        sel = np.round(dt, 4) == k
+        R = rotation_zyx(0.0, pitch_dps * k, 0.0)
+        out[sel, :3] = pts[sel, :3] @ R.T + np.array([speed_mps * k, 0.0, 0.0])
+    return Variant(out.astype(np.float32), v.ring.copy(), v.time.copy(), v.sensor_pose)
 
 
 def ring_accuracy(found: np.ndarray, truth: np.ndarray) -> float:
