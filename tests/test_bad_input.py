@@ -16,8 +16,10 @@ import json
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import tracemalloc
 from types import SimpleNamespace
 
@@ -923,3 +925,55 @@ def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
         expect=(f"{path}: point cloud file not reachable: a symbolic link to "
                 f"{tmp_path / 'moved.bin'}, which does not exist"))
+
+# --- sizes, excerpts and start-up -------------------------------------------------------------
+
+def _caught(pid: int) -> int:
+    """The signals process ``pid`` catches (a handler is installed), as a bit mask (bit
+    signum - 1), from /proc; 0 when it has gone."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            return next(int(ln.split()[1], 16) for ln in fh if ln.startswith("SigCgt:"))
+    except (OSError, StopIteration):
+        return 0
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("how", ["-m", "console"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])
+def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, delay):
+    """SIGINT or SIGTERM while the command line starts (it imports numpy, OpenCV and numba
+    for about a second): one line and exit 130 or 143, no traceback; once the run proper has
+    begun, SIGTERM is a Ctrl-C (exit 130; test_resume.py
+    ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
+
+    The delays count from the moment the process catches SIGTERM, i.e. from the first lines
+    of paretocal/__main__.py (before them the interpreter starts, about 15 ms of site and
+    runpy that no code of the package can reach: a signal then kills the process, or Python
+    prints its own traceback). Without those lines the command line caught it only once
+    cli.main ran, and a signal before that ended the process with a traceback (SIGINT) or
+    silently (SIGTERM)."""
+    args = ["calibrate", str(raw_date), "--out", str(tmp_path / "run"), "--gens", "3000",
+            "--frames", "0:2", "--no-figures"]
+    start = (["-m", "paretocal"] if how == "-m"
+             else ["-c", "from paretocal.__main__ import console; console()"])
+    proc = subprocess.Popen([sys.executable, *start, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    term = 1 << (signal.SIGTERM - 1)
+    deadline = time.monotonic() + 60
+    while not _caught(proc.pid) & term and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.0005)
+    time.sleep(delay)
+    proc.send_signal(sig)
+    out, _ = proc.communicate(timeout=120)
+    lines = out.strip().splitlines()
+    assert "Traceback" not in out and len(lines) == 1, out
+    starting = {signal.SIGINT: (130, "paretocal: interrupted while starting; nothing was written"),
+                signal.SIGTERM: (143, "paretocal: terminated while starting; nothing was written")}
+    if delay > 0.02 and (proc.returncode, lines[0]) != starting[sig]:
+        # The command line took over (after importing typer and click, some 0.1 s): as today.
+        assert proc.returncode == 130 and lines[0].startswith("paretocal: interrupted"), out
+    else:
+        assert (proc.returncode, lines[0]) == starting[sig], out
+    assert not (tmp_path / "run" / "result.json").exists()
