@@ -928,6 +928,40 @@ def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames
 
 # --- sizes, excerpts and start-up -------------------------------------------------------------
 
+def test_a_read_only_file_system_is_not_called_no_permission(capfd, tmp_path, rig,
+                                                             monkeypatch):
+    """os.access says no for a folder on a read-only mount as for one without permission;
+    the file system's flags tell which (no read-only mount is available to the tests)."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access, real_statvfs = os.access, os.statvfs
+
+    def access(path, mode, *args, **kwargs):
+        return False if str(path).startswith(str(ro)) else real_access(path, mode, *args, **kwargs)
+
+    def statvfs(path):
+        if str(path).startswith(str(ro)):
+            return SimpleNamespace(f_flag=os.ST_RDONLY)
+        return real_statvfs(path)
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(os, "statvfs", statvfs)
+    bad(capfd, "calibrate", rig, "--out", ro / "run", *FAST,
+        expect=f"--out {ro / 'run'}: read-only file system")
+    bad(capfd, "perturb", rig, "--out", ro / "init.yaml",
+        expect=f"--out {ro / 'init.yaml'}: read-only file system")
+
+    out, real_replace = tmp_path / "o", os.replace
+
+    def replace(src, dst, *args, **kwargs):                 # the file system went read-only
+        if str(dst).startswith(str(out)):
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+        return real_replace(src, dst, *args, **kwargs)
+    monkeypatch.setattr(os, "access", real_access)
+    monkeypatch.setattr(os, "replace", replace)
+    bad(capfd, "calibrate", rig, "--out", out, *FAST, "-q",
+        expect=(str(out), "cannot write (Read-only file system)"))
+
+
 def _caught(pid: int) -> int:
     """The signals process ``pid`` catches (a handler is installed), as a bit mask (bit
     signum - 1), from /proc; 0 when it has gone."""
