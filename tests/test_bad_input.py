@@ -1305,10 +1305,10 @@ def _caught(pid: int) -> int:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])
 def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, delay):
-    """SIGINT or SIGTERM while the command line starts (it imports numpy, OpenCV and numba
-    for about a second): one line and exit 130 or 143, no traceback; once the run proper has
-    begun, SIGTERM is a Ctrl-C (exit 130; test_resume.py
-    ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
+    """SIGINT or SIGTERM while the command line starts (it imports typer and click, some
+    0.1 s, before cli.main takes over): one line and exit 130 or 143, no traceback; from then
+    on SIGTERM is a Ctrl-C, as before (exit 130, "interrupted before the run started" or how
+    the run stopped; test_resume.py ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
 
     The delays count from the moment the process catches SIGTERM, i.e. from the first lines
     of paretocal/__main__.py (before them the interpreter starts, about 15 ms of site and

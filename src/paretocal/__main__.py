@@ -1,9 +1,9 @@
 """``python -m paretocal`` and the ``paretocal`` console script.
 
 The first thing this module does is take over SIGINT and SIGTERM: until the command line
-installs its own handlers (:func:`paretocal.cli.main`, about a second later, once numpy, OpenCV
-and numba are loaded), either signal ends the process at once with one line, exit status 130
-(SIGINT) or 143 (SIGTERM): nothing has been written yet. Nothing heavy is imported before, and
+installs its own handlers (:func:`paretocal.cli.main`, once typer and click are imported, some
+0.1 s later), either signal ends the process at once with one line, exit status 130 (SIGINT)
+or 143 (SIGTERM): nothing has been written yet. Nothing heavy is imported before, and
 ``paretocal/__init__.py``, which runs first, imports nothing.
 """
 
