@@ -34,7 +34,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .errors import InputError, ParetocalError
+from .errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
 from .io.atomic import atomic_path, atomic_write_text
 from .report.results import json_default
 
@@ -84,23 +84,27 @@ def read_manifest(path: str | Path) -> list[Entry]:
     ``source``, a duplicate or unsafe id (it names a folder), an unknown field, or a field of
     the wrong type.
     """
+    from .io.paths import kind_of, not_found
+
     path = Path(path)
-    if path.is_dir():
+    kind = kind_of(path)
+    if kind == "a folder":
         raise InputError(f"{path}: is a folder; expected a YAML or CSV manifest")
-    if not path.is_file():
-        raise InputError(f"{path}: manifest not found")
+    if kind != "a regular file":              # a FIFO is not opened: it would block
+        raise InputError(f"{path}: a manifest expected, but this is {kind}" if kind
+                         else not_found(path, "manifest"))
     text = _manifest_text(path)
     if path.suffix.lower() == ".csv":
         rows = _csv_rows(path, text)
     else:
         import yaml
 
-        from .io.readers import load_yaml
+        from .io.readers import load_yaml, yaml_error
 
         try:
-            doc = load_yaml(text, path)              # refuses alias bombs, naming the manifest
+            doc = load_yaml(text, path)      # refuses alias bombs and duplicate keys, naming it
         except yaml.YAMLError as exc:
-            raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+            raise yaml_error(path, exc) from None
         rows = doc.get("entries") if isinstance(doc, dict) else doc
         if not isinstance(rows, list):
             raise InputError(f"{path}: expected a list of entries (or a mapping with 'entries')")
@@ -112,11 +116,11 @@ def read_manifest(path: str | Path) -> list[Entry]:
             raise InputError(f"{where}: expected a mapping of fields")
         odd = [key for key in row if not isinstance(key, str)]
         if odd:
-            raise InputError(f"{where}: field name {odd[0]!r} is not text")
+            raise InputError(f"{where}: field name {quote(odd[0])} is not text")
         row = {key: v for key, v in row.items() if v not in (None, "")}
         unknown = sorted(set(row) - known)
         if unknown:
-            raise InputError(f"{where}: unknown field(s) {', '.join(unknown)} "
+            raise InputError(f"{where}: unknown field(s) {key_list(unknown)} "
                              f"(known: {', '.join(sorted(known))})")
         for key in ("id", "source"):
             if key not in row:
@@ -124,16 +128,17 @@ def read_manifest(path: str | Path) -> list[Entry]:
         fields = {key: _field(where, key, v) for key, v in row.items()}
         eid = fields["id"]
         if not _ID.match(eid):
-            raise InputError(f"{where}: id {eid!r} must be letters, digits, '_', '-' or '.'")
+            raise InputError(f"{where}: id {quote(eid)} must be letters, digits, '_', '-' or '.'")
         if eid in seen:
-            raise InputError(f"{where}: duplicate id {eid!r}")
+            raise InputError(f"{where}: duplicate id {quote(eid)}")
         seen.add(eid)
         for key in ("source", "init"):
             if key in fields:
                 try:
                     fields[key] = str((path.parent / fields[key]).resolve())
                 except (OSError, RuntimeError) as exc:       # RuntimeError: a symlink loop
-                    raise InputError(f"{where}: {key} {fields[key]!r}: {exc}") from None
+                    raise InputError(f"{where}: {key} {quote(fields[key])}: "
+                                     f"{first_line(exc)}") from None
         entries.append(Entry(**fields))
     if not entries:
         raise InputError(f"{path}: the manifest lists no entries")
@@ -143,7 +148,13 @@ def read_manifest(path: str | Path) -> list[Entry]:
 def _manifest_text(path: Path) -> str:
     """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
     before a parser reports it as something else."""
+    from .io.readers import MAX_TEXT_BYTES
+
     try:
+        size = path.stat().st_size
+        if size > MAX_TEXT_BYTES:
+            raise InputError(f"{path}: {size:,} bytes, more than the {MAX_TEXT_BYTES >> 20} MiB "
+                             "a manifest may hold")
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"{path}: cannot read the manifest ({exc.strerror or exc})") from None
@@ -170,7 +181,7 @@ def _csv_rows(path: Path, text: str) -> list[dict]:
             rows.append({k.strip(): v.strip() if isinstance(v, str) else v
                          for k, v in row.items()})
     except csv.Error as exc:
-        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({exc})") from None
+        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({first_line(exc)})") from None
     return rows
 
 
@@ -185,11 +196,11 @@ def _field(where: str, key: str, value) -> str | int:
             return value
         if isinstance(value, str) and value.strip().isdigit():
             return int(value)
-        raise InputError(f"{where}: camera {value!r} is not an integer")
+        raise InputError(f"{where}: camera {quote(value)} is not an integer")
     if key in ("vehicle", "order"):
         if isinstance(value, (str, int, float)) and not isinstance(value, bool):
             return str(value)
-        raise InputError(f"{where}: {key} {value!r} must be text or a number")
+        raise InputError(f"{where}: {key} {quote(value)} must be text or a number")
     if isinstance(value, str):
         return value
     hint = ""
@@ -197,7 +208,7 @@ def _field(where: str, key: str, value) -> str | int:
         hint = ('; quote it (frames: "2:4"): YAML reads unquoted 2:4 as the number 124'
                 if key == "frames" else
                 f'; quote it ({key}: "0005"): YAML reads unquoted 0005 as the number 5')
-    raise InputError(f"{where}: {key} {value!r} must be text{hint}")
+    raise InputError(f"{where}: {key} {quote(value)} must be text{hint}")
 
 
 def read_record(run_dir: Path) -> dict | None:
@@ -216,10 +227,15 @@ def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
     whether it is checked and drawn. A record is done only for the same fingerprint."""
     from .search.checkpoint import fingerprint
 
+    from .io.readers import MAX_TEXT_BYTES
+
     init = None
     if entry.init:
+        path = Path(entry.init)
         try:
-            init = hashlib.sha256(Path(entry.init).read_bytes()).hexdigest()
+            # Only a regular file of a readable size: a FIFO would block, a device never end.
+            if path.is_file() and path.stat().st_size <= MAX_TEXT_BYTES:
+                init = hashlib.sha256(path.read_bytes()).hexdigest()
         except OSError:
             pass                     # the entry fails on it when it runs; nothing to compare
     return fingerprint(asdict(entry), init, settings,
@@ -233,7 +249,9 @@ def is_done(record: dict | None, fingerprint: str) -> bool:
 
 
 def _failed(entry: Entry, reason: str, t0: float) -> dict:
-    return {**asdict(entry), "status": "failed", "reason": reason,
+    """The record of a failed entry; its reason is one line of at most MESSAGE_CHARS (the
+    summary table's ``reason`` column)."""
+    return {**asdict(entry), "status": "failed", "reason": excerpt(reason, MESSAGE_CHARS),
             "wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()}
 
 
@@ -254,7 +272,8 @@ class _EntryLog(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         if record.thread == self.thread:
             try:
-                self.records.append([record.levelname, record.getMessage()])
+                self.records.append([record.levelname,
+                                     excerpt(record.getMessage(), MESSAGE_CHARS)])
             except Exception:  # noqa: BLE001 - a bad format string must not fail the entry
                 self.handleError(record)
 

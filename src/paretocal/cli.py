@@ -17,7 +17,7 @@ from typing import Annotated, Optional
 import click
 import typer
 
-from .errors import STOP, ParetocalError, SettingsError
+from .errors import MESSAGE_CHARS, STOP, ParetocalError, SettingsError, excerpt
 
 # Options shared by several commands, declared once.
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
@@ -831,7 +831,8 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
         # typer turns KeyboardInterrupt into exit status 130 itself.
         return _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
     except ParetocalError as exc:
-        print(f"paretocal: error: {exc}", file=sys.stderr)
+        # One line, whatever the message holds (control characters escaped, length bounded).
+        print(f"paretocal: error: {excerpt(exc, MESSAGE_CHARS)}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, typer.Abort, click.exceptions.Abort):
         return _interrupted(name)
@@ -848,8 +849,9 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
             import traceback
 
             traceback.print_exc()
-        print(f"paretocal: unexpected error: {type(exc).__name__}: {exc} "
-              "(rerun with --verbose for the traceback)", file=sys.stderr)
+        print(f"paretocal: unexpected error: {type(exc).__name__}: "
+              f"{excerpt(exc, MESSAGE_CHARS)} (rerun with --verbose for the traceback)",
+              file=sys.stderr)
         return 1
     finally:
         sys.unraisablehook = unraisable

@@ -75,8 +75,19 @@ def _check_parents(path: Path, option: str) -> None:
             if not parent.is_dir():
                 raise SettingsError(f"{option} {path}: {parent} is a file, not a folder")
             if not os.access(parent, os.W_OK | os.X_OK):
-                raise SettingsError(f"{option} {path}: no permission to write there")
+                raise SettingsError(f"{option} {path}: {_not_writable(parent)}")
             return
+
+
+def _not_writable(folder: Path) -> str:
+    """Why a folder ``os.access`` finds unwritable cannot be written: its file system is
+    mounted read-only (EROFS, which no permission fixes) or there is no permission."""
+    try:
+        if os.statvfs(folder).f_flag & os.ST_RDONLY:
+            return "read-only file system"
+    except (OSError, AttributeError):            # AttributeError: no statvfs (Windows)
+        pass
+    return "no permission to write there"
 
 
 def check_output_dir(path: Path, option: str = "--out") -> Path:
@@ -95,7 +106,7 @@ def check_output_dir(path: Path, option: str = "--out") -> Path:
         if not path.is_dir():
             raise SettingsError(f"{option} {path}: exists and is not a folder")
         if not os.access(path, os.W_OK | os.X_OK):
-            raise SettingsError(f"{option} {path}: no permission to write there")
+            raise SettingsError(f"{option} {path}: {_not_writable(path)}")
         return path
     _check_parents(path, option)
     return path

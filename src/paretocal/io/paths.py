@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 from pathlib import Path
 
 
@@ -47,13 +48,47 @@ def broken_link(path: Path) -> str | None:
 
 
 
-def missing(path: Path) -> str:
-    """Why ``path`` cannot be opened, for a message: "not found", or "not reachable: ..." when
-    a symbolic link on the way leads nowhere (:func:`broken_link`)."""
+#: What a stat mode is, in words, for messages.
+_KINDS = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a folder"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"))
+
+
+def kind_of(path: Path) -> str | None:
+    """What stands at ``path`` (links followed), in words: ``"a regular file"``, ``"a
+    folder"``, ``"a character device"`` (``/dev/zero``), ``"a named pipe (FIFO)"``, ...; None
+    when nothing can be reached there. Only the file's metadata is read, so a FIFO is never
+    opened (which would wait for a writer)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return next((words for test, words in _KINDS if test(mode)), "not a regular file")
+
+
+def missing(path: Path, want: str = "a regular file") -> str:
+    """Why ``path`` cannot be opened as ``want`` (``"a regular file"`` or ``"a folder"``), for
+    a message: ``"is a character device, not a regular file"`` when something else stands
+    there, else "not found", "not reachable: ..." when a symbolic link on the way leads
+    nowhere (:func:`broken_link`), or "cannot be reached (...)" with the system's reason (a
+    name too long, a folder on the way without permission)."""
+    kind = kind_of(path)
+    if kind is not None and kind != want:
+        return f"is {kind}, not {want}"
+    if "\0" in str(path):
+        return "cannot be reached (the name holds a NUL character)"
     link = broken_link(path)
-    return f"not reachable: {link}" if link else "not found"
+    if link:
+        return f"not reachable: {link}"
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOENT, errno.ENOTDIR):
+            return f"cannot be reached ({exc.strerror})"    # a name too long, no permission
+    return "not found"
 
 
-def not_found(path: Path, what: str) -> str:
-    """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere."""
-    return f"{path}: {what} {missing(path)}"
+def not_found(path: Path, what: str, want: str = "a regular file") -> str:
+    """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere, or what
+    stands there instead of ``want`` (:func:`missing`)."""
+    return f"{path}: {what} {missing(path, want)}"
