@@ -118,3 +118,23 @@ def check_output_file(path: Path, option: str = "--out") -> Path:
                             "to write)")
     _check_parents(path, option)
     return path
+
+
+def check_own_folder(path: Path, marks: tuple[str, ...], what: str,
+                     option: str = "--out") -> None:
+    """Refuse a folder ``path`` that is not empty and holds none of ``marks`` (names only a
+    paretocal ``what`` folder holds): writing there would replace the user's files of the same
+    names. Raises :class:`~paretocal.errors.SettingsError` naming ``option`` and ``--force``.
+    """
+    try:
+        names = set(os.listdir(path))
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    except OSError as exc:
+        raise SettingsError(f"{option} {path}: cannot list the folder ({exc.strerror})"
+                            ) from None
+    if names and not names & set(marks):
+        raise SettingsError(f"{option} {path}: the folder is not empty and is not a paretocal "
+                            f"{what} folder (none of {', '.join(marks)}); choose a new or "
+                            f"empty folder, or add --force to write the {what} into it (its "
+                            "files of the same names are replaced)")
