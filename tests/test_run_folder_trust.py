@@ -1,7 +1,7 @@
 """Nothing read from a run folder reaches outside it: ``.outputs``, the run's own files, the
 checkpoint and the recorded arguments are checked before anything is touched; a folder of
 other files is not taken for a run folder; ``result.json`` always comes with its own run's
-``run_args.json``."""
+``run_args.json``; stale temporaries do not outlive a finished run."""
 
 from __future__ import annotations
 
@@ -435,3 +435,34 @@ def test_a_folder_of_the_previous_release_resumes(capfd, tmp_path, stopped_run):
     names = {p.name for p in run.iterdir()}
     assert {"result.json", "run_args.json"} <= names
     assert not {ARGS, "checkpoint.npz", "partial_front.csv", ".staging", ".lock"} & names
+
+
+# --- stale temporaries do not outlive a finished run ---------------------------------------------
+
+def test_a_finished_resume_removes_stale_temporaries_of_its_files_only(capfd, tmp_path,
+                                                                      stopped_run):
+    run = _copy(stopped_run, tmp_path)
+    stale = [".checkpoint.npz.k3j_x9qa.tmp.npz", ".result.json.abcdefgh.tmp.json",
+             f".{ARGS}.0123abcd.tmp.json"]
+    kept = [".checkpoint.npz.short.tmp.npz", ".notes.txt.abcdefgh.tmp.txt",
+            "checkpoint.npz.abcdefgh.tmp.npz"]
+    for name in stale + kept:
+        (run / name).write_bytes(b"partial")
+    target = tmp_path / "target.npz"
+    target.write_bytes(b"mine")
+    (run / ".checkpoint.npz.linkedxx.tmp.npz").symlink_to(target)      # links: not removed
+    code, _, err = run_cli(capfd, "calibrate", "--resume", run, "--quiet")
+    assert code == 0, err
+    names = {p.name for p in run.iterdir()}
+    assert not set(stale) & names
+    assert set(kept) | {".checkpoint.npz.linkedxx.tmp.npz"} <= names
+    assert target.read_bytes() == b"mine"
+
+
+def test_atomic_paths_temporaries_match_the_pattern(tmp_path):
+    from paretocal.io.atomic import atomic_path, temporary_pattern
+
+    for name in ("checkpoint.npz", "result.json", ".outputs", "calib_velo_to_cam.txt"):
+        with atomic_path(tmp_path / name) as tmp:
+            tmp.write_text("x")
+            assert temporary_pattern(tmp_path / name).fullmatch(tmp.name), tmp.name

@@ -19,7 +19,8 @@ A folder holds one run:
 * the outputs are written to ``.staging/`` first, then the previous run's outputs (listed in
   ``.outputs``) are removed, the new ones (``run_args.json`` among them) moved in, and
   ``result.json`` moved last: a folder with ``result.json`` holds exactly one complete run, and
-  its ``run_args.json`` is that run's; one without it no complete run.
+  its ``run_args.json`` is that run's; one without it no complete run. Publishing also removes
+  the temporaries that a kill during an atomic write of the run's files left.
 
 Nothing read from the folder reaches outside it (:func:`check_run_folder`, before the run and
 again before publishing; nothing is touched when it refuses): the run's own files are never
@@ -45,7 +46,7 @@ from .config import Settings, settings_from_mapping
 from .errors import InputError, Interrupted, ParetocalError
 from .geometry import check_rigid
 from .io import load_frames, rig_source
-from .io.atomic import atomic_write_text
+from .io.atomic import atomic_write_text, temporary_pattern
 from .io.frame import Frame
 from .io.paths import not_plain, odd_kind, open_plain
 from .pipeline import calibrate
@@ -221,7 +222,20 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
     for name in sorted(names, key=lambda n: n == RESULT):
         os.replace(staging / name, out / name)
     shutil.rmtree(staging, ignore_errors=True)
+    _remove_temporaries(out, set(names) | set(MARKS))
     return [out / n for n in names]
+
+
+def _remove_temporaries(out: Path, names) -> None:
+    """Remove the temporaries that a kill during an atomic write of one of ``names`` left in
+    ``out`` (exactly :func:`~paretocal.io.atomic.temporary_pattern`'s names, plain files)."""
+    patterns = [temporary_pattern(out / n) for n in names]
+    with os.scandir(out) as entries:
+        for entry in entries:
+            if (entry.is_file(follow_symlinks=False)
+                    and any(p.fullmatch(entry.name) for p in patterns)):
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(entry.path)
 
 
 class _RunCheckpoint(Checkpoint):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -57,6 +58,15 @@ def atomic_path(path: Path):
     finally:
         if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def temporary_pattern(path: Path) -> re.Pattern:
+    """The names :func:`atomic_path` gives the temporaries of ``path``:
+    ``.NAME.XXXXXXXX.tmpSUFFIX``, the X being :func:`tempfile.mkstemp`'s eight random
+    letters, digits or underscores. A kill before the rename leaves one behind."""
+    path = Path(path)
+    return re.compile(re.escape(f".{path.name}.") + "[a-z0-9_]{8}"
+                      + re.escape(".tmp" + path.suffix))
 
 
 def atomic_write_text(path: Path, text: str) -> None:
