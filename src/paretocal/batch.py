@@ -39,6 +39,9 @@ from .io.atomic import atomic_path, atomic_write_text
 from .report.results import json_default
 
 RECORD = "entry.json"
+#: Names a batch folder holds (runs/ from the first task on): the CLI refuses to write a batch
+#: into a non-empty folder holding none of them unless told to (``--force``).
+BATCH_MARKS = ("runs", "summary.csv")
 log = logging.getLogger(__name__)
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
@@ -320,15 +323,21 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
         pairs logged while the entry ran).
     """
-    from .rundir import locked
+    from .io.paths import not_plain, odd_kind
+    from .rundir import check_run_folder, locked
 
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
     with _EntryLog(log_level) as messages:
         try:
+            # The batch makes its entries' folders: one that is a link leads elsewhere.
+            kind = odd_kind(run_dir, folder=True)
+            if kind:
+                raise not_plain(run_dir, kind, "an entry's run folder")
             # One writer per run folder: a task left running by an interrupted batch on a
             # remote cluster must not mix its files with the rerun's.
             with locked(run_dir):
+                check_run_folder(run_dir)          # refused before calibrating, not after
                 # The record describes the last attempt: drop the old one before starting,
                 # so a task killed half-way leaves no record that says "ok".
                 (run_dir / RECORD).unlink(missing_ok=True)
@@ -367,15 +376,17 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
     from .pipeline import calibrate
-    from .rundir import publish_run
+    from .rundir import publish_run, run_record
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_extrinsic(entry.init) if entry.init else None
     result = calibrate(frames, T_init, settings)
-    # Staged and published with result.json last: the folder never mixes two runs.
-    publish_run(result, run_dir, result.sweeps or frames, figures=figures)
+    # Staged and published with result.json last: the folder never mixes two runs, and its
+    # run_args.json is always the run's own.
+    publish_run(result, run_dir, result.sweeps or frames, figures=figures,
+                args=run_record(entry.source, T_init, settings, figures))
     drift = pose_error(result.T_cam_lidar, result.T_init)
     ref = result.reference_error or {}
     record = {**asdict(entry), "status": "ok", "reason": "",

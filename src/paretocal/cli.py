@@ -21,6 +21,9 @@ from .errors import MESSAGE_CHARS, STOP, ParetocalError, SettingsError, excerpt
 
 # Options shared by several commands, declared once.
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
+Force = Annotated[bool, typer.Option(
+    "--force", help="Write into --out even when it is a folder of other files (those of the "
+                    "same names are replaced).")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")]
 Frames = Annotated[Optional[str], typer.Option("--frames", help="Frames: '0:10', '0,3,7' or stems.")]
 ConfigFile = Annotated[Optional[Path], typer.Option("--config",
@@ -229,13 +232,13 @@ def calibrate(
     strict: Annotated[bool, typer.Option(
         "--strict", help="Exit with status 3 when the result is judged unreliable (the outputs "
                          "are written either way).")] = False,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
     from .io import load_frames
-    from .io.atomic import check_output_dir
 
     _setup_logging(verbose, quiet)
     if resume is not None:
@@ -246,7 +249,7 @@ def calibrate(
                  "--init-error": init_error, "--bound-t": bound_t, "--bound-r": bound_r,
                  "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
                  "--evaluator": evaluator, "--polish/--no-polish": polish,
-                 "--no-figures": None if figures else False}
+                 "--no-figures": None if figures else False, "--force": force or None}
         clash = [name for name, value in given.items() if value is not None]
         if clash:
             raise SettingsError(f"--resume {resume} continues the run with the data, start and "
@@ -275,7 +278,7 @@ def calibrate(
     from .io import is_rig
     if is_rig(source):
         return _calibrate_rig(source, out, init, camera, frames, settings, err_deg is None,
-                              figures, quiet, checkpoint_every, strict)
+                              figures, quiet, checkpoint_every, strict, force)
     if camera is not None:
         camera = _camera_index(camera)
     if camera is not None or frames is not None:
@@ -284,11 +287,24 @@ def calibrate(
                                        frames=frames if frames is not None else settings.frames)
     settings, detected = _dataset_options(settings, source, err_deg is None)
     settings.validate()
-    check_output_dir(out)
+    _check_run_out(out, force)
     T_init = read_init(init, detected, settings.camera) if init is not None else None
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                      strict)
+
+
+def _check_run_out(out: Path, force: bool, option: str = "--out") -> None:
+    """Fail before any work when ``out`` cannot take a calibration run: not a writable
+    folder, a non-empty folder that is no run folder (unless ``force``), or a run folder
+    holding what a run must not follow (:func:`paretocal.rundir.check_run_folder`)."""
+    from .io.atomic import check_output_dir, check_own_folder
+    from .rundir import MARKS, check_run_folder
+
+    check_output_dir(out, option)
+    if not force:
+        check_own_folder(out, MARKS, "run", option)
+    check_run_folder(out)
 
 
 def _camera_index(text: str) -> int:
@@ -302,14 +318,14 @@ def _camera_index(text: str) -> int:
 
 def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,
                    take_init_error: bool, figures: bool, quiet: bool, checkpoint_every: int,
-                   strict: bool) -> None:
+                   strict: bool, force: bool) -> None:
     """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
     and ``out/rig.json`` (:mod:`paretocal.rig`)."""
     import dataclasses
 
     from .errors import Interrupted
     from .io import rig_cameras
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
     from .rig import RIG_JSON, calibrate_rig, pair_line
 
     cams = rig_cameras(source)
@@ -326,6 +342,10 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     settings = _adopt_init_error(settings, cams[0][1].options, take_init_error)
     settings.validate()
     check_output_dir(out)
+    if not force:       # a rig's run folder holds rig.json and a run folder per camera
+        check_own_folder(out, (RIG_JSON, *names), "rig run")
+    for name in [camera] if camera is not None else names:
+        _check_run_out(out / name, force)
     T_inits = {camera: read_init(init, source, None)} if init is not None else None
     interactive = sys.stderr.isatty() and not quiet
     unreliable = []
@@ -425,10 +445,11 @@ def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
     from .io.atomic import check_output_dir
-    from .rundir import run_arguments
+    from .rundir import check_run_folder, run_arguments
 
     args = run_arguments(run_dir)              # a one-line error before anything is loaded
     check_output_dir(run_dir, "--resume")
+    check_run_folder(run_dir)
     _run_calibration(None, args["source"], args["T_init"], args["settings"], run_dir,
                      args["figures"], quiet, max(checkpoint_every, 1), strict, resume=True)
 
@@ -545,6 +566,7 @@ def study(
                                                         "frames: a smoke test.")] = False,
     camera: CameraOrConfig = None,
     config: ConfigFile = None,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
@@ -554,12 +576,14 @@ def study(
 
     from .config import load_settings
     from .io import load_frames
-    from .study import StudyPlan, run_study
+    from .study import STUDY_MARKS, StudyPlan, run_study
 
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     check_output_dir(out)
+    if not force:
+        check_own_folder(out, STUDY_MARKS, "study")
     plan = StudyPlan.quick() if quick else StudyPlan()
     plan = dataclasses.replace(plan, **{k: v for k, v in (("pop", pop), ("gens", gens))
                                         if v is not None})
@@ -705,6 +729,7 @@ def batch(
     gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
     seed: Seed = None,
     config: ConfigFile = None,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
@@ -716,15 +741,17 @@ def batch(
     when interrupted (Ctrl-C or SIGTERM), after writing the summary of what is done: rerun the
     same command to continue.
     """
-    from .batch import BatchInterrupted, run_batch
+    from .batch import BATCH_MARKS, BatchInterrupted, run_batch
     from .config import load_settings
 
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     if workers < 1:
         raise SettingsError("--workers must be at least 1")
     check_output_dir(out)
+    if not force:
+        check_own_folder(out, BATCH_MARKS, "batch")
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
     interactive = sys.stderr.isatty() and not quiet

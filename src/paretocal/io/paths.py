@@ -1,5 +1,6 @@
 """What is wrong with a path that leads nowhere: a symbolic link loop or a dangling link, told
-apart from a plain missing file so that messages say which."""
+apart from a plain missing file so that messages say which; and what stands at a path that
+should be a plain file or folder (a run folder's own files are never followed through a link)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import errno
 import os
 import stat
 from pathlib import Path
+
+from ..errors import InputError
 
 
 def broken_link(path: Path) -> str | None:
@@ -92,3 +95,43 @@ def not_found(path: Path, what: str, want: str = "a regular file") -> str:
     """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere, or what
     stands there instead of ``want`` (:func:`missing`)."""
     return f"{path}: {what} {missing(path, want)}"
+
+
+def odd_kind(path: Path, folder: bool = False) -> str | None:
+    """What stands at ``path`` when it is not a plain file (``folder``: not a plain folder),
+    without following a symbolic link there: ``"a symbolic link"``, ``"a directory"``, ``"a
+    file"`` or ``"a special file"``; None when it is the expected kind or absent."""
+    try:
+        mode = os.lstat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if (stat.S_ISDIR if folder else stat.S_ISREG)(mode):
+        return None
+    return ("a directory" if stat.S_ISDIR(mode) else "a file" if stat.S_ISREG(mode)
+            else "a special file")
+
+
+def not_plain(path: Path, kind: str, what: str = "a plain file") -> InputError:
+    """The one-line error for ``path``, which is ``kind`` (:func:`odd_kind`) instead of
+    ``what``."""
+    return InputError(f"{path}: is {kind}, not {what}; remove it (paretocal does not follow "
+                      "or replace it)")
+
+
+def open_plain(path: Path, what: str = "a plain file"):
+    """``path`` opened for reading in binary, never through a symbolic link at its last
+    component and never blocking on a FIFO. Raises FileNotFoundError when it is absent and
+    :func:`not_plain`'s error (naming ``what`` it should be) when it is not a plain file."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.EISDIR, errno.ENXIO):
+            raise not_plain(path, odd_kind(path) or "a special file", what) from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise not_plain(path, odd_kind(path) or "a special file", what)
+    return os.fdopen(fd, "rb")
