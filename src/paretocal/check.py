@@ -40,7 +40,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         trusted), with what to do.
     """
     from .inputs import prepare_lidar
-    from .stage import Stage
+    from .stage import Stage, feature_counts
 
     settings = (settings or Settings()).validate()
     T = np.asarray(T, dtype=np.float64)
@@ -88,4 +88,5 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "T_local_optimum": T_opt.tolist(),
         "quality": quality,
         "frames": [f.name for f in frames],
+        "features": feature_counts(stage.feats),
     }

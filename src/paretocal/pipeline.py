@@ -30,7 +30,7 @@ from .objective import get_evaluator
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
 from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
-                    holdout_score, n_range, prepare_features)
+                    holdout_score, log_features, n_range, prepare_features)
 from .verdict import (MIN_POINTS_PER_FRAME, RELIABLE_MIN_FRAMES, gather_evidence,  # noqa: F401
                       reliability, verdict_text)
 
@@ -98,6 +98,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                       if stored else None)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
+        log_features(stage.feats)
         _check_budget(stage, settings.decision)
     res, seeds = _search(stage, frames, T_init, settings, checkpoint, report, timings)
     try:
