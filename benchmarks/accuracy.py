@@ -156,6 +156,21 @@ def make_variant(points, name: str, k: int = 0):
     return v
 
 
+def located_pose(frames, settings=None) -> np.ndarray:
+    """The LiDAR's pose in the clouds' frame as the tool finds it
+    (:func:`paretocal.inputs.locate_lidar`: calib.yaml's ``lidar_pose``, the cloud's own
+    origin, or estimated from the first sweep), shape (4, 4), cloud <- sensor."""
+    from paretocal.config import Settings
+    from paretocal.inputs import locate_lidar
+
+    moved, info, _ = locate_lidar(list(frames), settings or Settings())
+    if info["source"] == "unknown":
+        raise SystemExit(f"accuracy.py: {frames[0].points_path}: the LiDAR's pose is not "
+                         f"known, so the sweep has no truth: {info.get('reason', '')}")
+    pose = moved[0].sensor_pose
+    return np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
+
+
 def generic_truth(loaded: list) -> list:
     """The sweeps of a generic source's frames with the rings the tool's own recovery finds
     (:func:`paretocal.testing.recovered_truth`): about the sensor as the tool locates it, judged
@@ -163,7 +178,7 @@ def generic_truth(loaded: list) -> list:
     in the cloud's frame with its stored order; ``time`` the file's where it has one."""
     from paretocal.config import FeatureSettings
     from paretocal.features.prepare import view_mask
-    from paretocal.testing import located_pose, recovered_truth
+    from paretocal.testing import recovered_truth
 
     pose = located_pose(loaded)
     out = []

@@ -104,6 +104,18 @@ def test_variants_of_a_generic_folder(acc, two_frames, tmp_path):
             np.testing.assert_allclose(T_ref, two_frames[0].T_ref, atol=1e-12)
 
 
+def test_located_pose_is_the_tools(acc, two_frames):
+    import dataclasses
+
+    from paretocal.testing import kitti_truth, to_vehicle_frame
+
+    # KITTI's clouds are in the sensor's frame; a pose calib.yaml gives is taken as it is.
+    np.testing.assert_array_equal(acc.located_pose(two_frames[:1]), np.eye(4))
+    P = to_vehicle_frame(kitti_truth(two_frames[0].points)).sensor_pose
+    moved = [dataclasses.replace(two_frames[0], sensor_pose=P)]
+    np.testing.assert_array_equal(acc.located_pose(moved), P)
+
+
 def test_vehicle_reference_keeps_the_pixels(acc, raw_date, two_frames, tmp_path):
     folder, T_veh, pose = acc.build_variant(raw_date, "vehicle", tmp_path / "v", frames="0,10")
     np.testing.assert_allclose(T_veh, two_frames[0].T_ref @ np.linalg.inv(pose), atol=1e-12)

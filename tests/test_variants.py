@@ -4,15 +4,13 @@ Ring recovery must not depend on the order a sensor's driver stores its points i
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from paretocal.features.rings import MIN_PURITY, azimuth, recover_rings
 from paretocal.geometry import invert, transform_points
-from paretocal.testing import (decimate, kitti_truth, located_pose, packet_order,
-                               recovered_truth, ring_accuracy, shuffled, to_vehicle_frame)
+from paretocal.testing import (decimate, kitti_truth, packet_order, recovered_truth,
+                               ring_accuracy, shuffled, to_vehicle_frame)
 
 
 @pytest.fixture(scope="module")
@@ -111,11 +109,3 @@ def test_recovered_truth_is_refused_when_implausible(sweeps):
     # About the right pose the truth is the exact one.
     w = recovered_truth(v.points, v.sensor_pose)
     assert ring_accuracy(w.ring, v.ring) >= 0.99
-
-
-def test_located_pose_is_the_tools(raw_frames):
-    # KITTI's clouds are in the sensor's frame; a pose calib.yaml gives is taken as it is.
-    np.testing.assert_array_equal(located_pose(raw_frames[:1]), np.eye(4))
-    P = to_vehicle_frame(kitti_truth(raw_frames[0].points)).sensor_pose
-    moved = [dataclasses.replace(raw_frames[0], sensor_pose=P)]
-    np.testing.assert_array_equal(located_pose(moved), P)

@@ -186,26 +186,6 @@ def compensated(v: Variant, speed_mps: float = 3.0, pitch_dps: float = 3.0,
     return Variant(out.astype(np.float32), v.ring.copy(), v.time.copy(), v.sensor_pose)
 
 
-def located_pose(frames, settings=None) -> np.ndarray:
-    """The LiDAR's pose in the clouds' frame as the tool finds it
-    (:func:`paretocal.inputs.locate_lidar`: calib.yaml's ``lidar_pose``, the cloud's own
-    origin, or estimated from the first sweep), shape (4, 4), cloud <- sensor.
-
-    Raises
-    ------
-    ValueError
-        When the tool finds no pose that its rings fit.
-    """
-    from .config import Settings
-    from .inputs import locate_lidar
-
-    moved, info, _ = locate_lidar(list(frames), settings or Settings())
-    if info["source"] == "unknown":
-        raise ValueError(f"the LiDAR's pose is not known: {info.get('reason', '')}")
-    pose = moved[0].sensor_pose
-    return np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
-
-
 def recovered_truth(points: np.ndarray, sensor_pose: np.ndarray,
                     rng: np.random.Generator | int | None = 0,
                     time: np.ndarray | None = None,
@@ -225,7 +205,8 @@ def recovered_truth(points: np.ndarray, sensor_pose: np.ndarray,
         The sweep in the cloud's own frame (x, y, z in metres, intensity), its stored order.
     sensor_pose : ndarray, shape (4, 4)
         The LiDAR's pose in the cloud's frame (cloud <- sensor): identity for a cloud in the
-        sensor's frame, :func:`located_pose` or a dataset's documented pose otherwise.
+        sensor's frame, otherwise where the tool locates it
+        (:func:`paretocal.inputs.locate_lidar`) or a dataset's documented pose.
     rng : numpy Generator or seed
         For the recovery's subsample.
     time : ndarray, shape (N,), optional
