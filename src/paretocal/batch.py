@@ -245,6 +245,22 @@ def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
                        {"check": bool(check), "figures": bool(figures)})
 
 
+def entry_settings(entry: Entry, settings, dataset_options: bool = True) -> dict:
+    """The settings ``entry`` runs with (:meth:`Settings.to_dict`): ``settings`` with what
+    its source's calib.yaml states where they leave the default
+    (:func:`~paretocal.config.dataset_settings`), as ``paretocal calibrate`` on the source
+    would. A calib.yaml that cannot be read adds nothing here: the entry fails on it when it
+    runs, with the reader's message in its record."""
+    from .config import dataset_settings
+    from .io import source_options
+
+    try:
+        options = source_options(entry.source) if dataset_options else {}
+    except (ParetocalError, OSError):
+        options = {}
+    return dataset_settings(settings, options, dataset_options).to_dict()
+
+
 def is_done(record: dict | None, fingerprint: str) -> bool:
     """Whether an entry's record says it calibrated, with the same entry and settings."""
     return (record is not None and record.get("status") == "ok"
@@ -456,7 +472,7 @@ def require_fleet() -> None:
 
 def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
               scheduler: str | None = None, workers: int | None = None, check: bool = True,
-              figures: bool = False, progress=None) -> dict:
+              figures: bool = False, progress=None, dataset_options: bool = True) -> dict:
     """Calibrate every entry of ``manifest`` on a Dask cluster.
 
     An entry is skipped when its ``entry.json`` says ``ok`` with the fingerprint
@@ -470,6 +486,9 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     manifest : path
     out_dir : path
     settings : Settings, optional
+        For each entry, what its source's calib.yaml states (``init_error``) replaces the
+        defaults these leave (:func:`~paretocal.config.dataset_settings`); the entry's
+        fingerprint covers the settings it runs with.
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``); by default a local
         cluster of ``workers`` processes (one thread each) is started and stopped.
@@ -480,6 +499,9 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
         See :func:`run_entry`.
     progress : callable, optional
         ``progress(done, total)`` as entries finish.
+    dataset_options : bool
+        False: the settings are final for every entry (they state ``init_error`` even where
+        it is the default).
 
     Returns
     -------
@@ -501,10 +523,10 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     t0 = time.perf_counter()
     entries = read_manifest(manifest)
     settings = (settings or Settings()).validate()
-    settings_dict = settings.to_dict()
+    by_entry = {e.id: entry_settings(e, settings, dataset_options) for e in entries}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    prints = {e.id: entry_fingerprint(e, settings_dict, check, figures) for e in entries}
+    prints = {e.id: entry_fingerprint(e, by_entry[e.id], check, figures) for e in entries}
     done = {}
     for e in entries:
         rec = read_record(out / "runs" / e.id)
@@ -515,7 +537,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     run_s = 0.0
     if pending:                                # nothing to run: no cluster to start
         try:
-            run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler,
+            run_s = _run_pending(pending, records, prints, by_entry, out, scheduler,
                                  workers, check, figures, progress)
         except KeyboardInterrupt:
             finished = [records[e.id] for e in entries if e.id in records]
@@ -537,11 +559,12 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
             "records": ordered, "files": files}
 
 
-def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dict: dict,
+def _run_pending(pending: list[Entry], records: dict, prints: dict, by_entry: dict,
                  out: Path, scheduler, workers, check: bool, figures: bool,
                  progress) -> float:
-    """Run the entries' tasks, adding their records to ``records`` as they finish; returns
-    the seconds from the cluster's start to its close."""
+    """Run the entries' tasks (``by_entry``: each entry's settings as a dict), adding their
+    records to ``records`` as they finish; returns the seconds from the cluster's start to
+    its close."""
     from distributed import as_completed
 
     log_level = logging.getLogger("paretocal").getEffectiveLevel()
@@ -550,7 +573,7 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dic
         client, cluster, threads = _connect(scheduler, workers, log_level)
     t_run = time.perf_counter()
     try:
-        futures = {client.submit(run_entry, e, settings_dict, str(out.resolve()), check,
+        futures = {client.submit(run_entry, e, by_entry[e.id], str(out.resolve()), check,
                                  threads, figures, prints[e.id], log_level,
                                  key=f"paretocal-{e.id}-{time.time_ns()}", pure=False): e
                    for e in pending}

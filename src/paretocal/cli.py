@@ -114,30 +114,6 @@ class _Progress:
             self.bar.__exit__(*exc)
 
 
-def _dataset_options(settings, source, take_init_error: bool):
-    """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
-    line or the config file already set them; returns ``(settings, detected source)``, the
-    source to load the frames from (detected once: its warnings are said once)."""
-    from .io import detect_source
-
-    detected = detect_source(Path(source), settings.camera)
-    return _adopt_init_error(settings, detected.options, take_init_error), detected
-
-
-def _adopt_init_error(settings, options: dict, take: bool):
-    """The dataset's own ``init_error`` (calib.yaml) when ``take`` and no option or config
-    file changed the default."""
-    from .config import SearchSettings
-
-    s = settings.search
-    if (take and "init_error" in options
-            and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
-                                                       SearchSettings.init_error_m)):
-        deg, m = options["init_error"]
-        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
-    return settings
-
-
 def read_init(path: Path, source, camera: int | None):
     """The extrinsic file ``path`` as ``T_cam_lidar``; a KITTI ``calib_velo_to_cam.txt`` is
     taken through the rectification of ``source`` (a folder, or a source already detected;
@@ -275,9 +251,14 @@ def calibrate(
                   "refine": polish, "max_deviation_px": max_deviation})
     import dataclasses
 
-    from .io import is_rig
+    from .config import states_init_error
+    from .io import detect_source, is_rig
+
+    # The dataset's own init_error (calib.yaml) applies unless the user set it: the library
+    # decides (config.dataset_settings) with the rest of the settings.
+    adopt = err_deg is None and not states_init_error(config)
     if is_rig(source):
-        return _calibrate_rig(source, out, init, camera, frames, settings, err_deg is None,
+        return _calibrate_rig(source, out, init, camera, frames, settings, adopt,
                               figures, quiet, checkpoint_every, strict, force)
     if camera is not None:
         camera = _camera_index(camera)
@@ -285,13 +266,14 @@ def calibrate(
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
-    settings, detected = _dataset_options(settings, source, err_deg is None)
     settings.validate()
+    # Detected once: its warnings are said once.
+    detected = detect_source(Path(source), settings.camera)
     _check_run_out(out, force)
     T_init = read_init(init, detected, settings.camera) if init is not None else None
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
-                     strict)
+                     strict, dataset_options=adopt)
 
 
 def _check_run_out(out: Path, force: bool, option: str = "--out") -> None:
@@ -317,7 +299,7 @@ def _camera_index(text: str) -> int:
 
 
 def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,
-                   take_init_error: bool, figures: bool, quiet: bool, checkpoint_every: int,
+                   dataset_options: bool, figures: bool, quiet: bool, checkpoint_every: int,
                    strict: bool, force: bool) -> None:
     """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
     and ``out/rig.json`` (:mod:`paretocal.rig`)."""
@@ -339,7 +321,6 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
                             "--camera NAME")
     if frames is not None:
         settings = dataclasses.replace(settings, frames=frames)
-    settings = _adopt_init_error(settings, cams[0][1].options, take_init_error)
     settings.validate()
     check_output_dir(out)
     if not force:       # a rig's run folder holds rig.json and a run folder per camera
@@ -363,7 +344,8 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         with _Progress(interactive) as progress:
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
-                                    checkpoint_every, progress, on_camera=said)
+                                    checkpoint_every, progress, on_camera=said,
+                                    dataset_options=dataset_options)
     except Interrupted as exc:
         _report(interrupted_line(exc, getattr(exc, "run_dir", out)))
         raise typer.Exit(130) from None
@@ -376,7 +358,8 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
 
 
 def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,
-                     checkpoint_every: int, strict: bool = False, resume: bool = False) -> None:
+                     checkpoint_every: int, strict: bool = False, resume: bool = False,
+                     dataset_options: bool = True) -> None:
     """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
     where the partial front and the checkpoint are, and exit 130."""
     from .errors import Interrupted
@@ -390,7 +373,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
             else:
                 result = calibrate_run(source, out, T_init, settings, frames=loaded,
                                        figures=figures, checkpoint_every=checkpoint_every,
-                                       progress=progress)
+                                       progress=progress, dataset_options=dataset_options)
     except Interrupted as exc:
         _report(interrupted_line(exc, out))
         raise typer.Exit(130) from None
@@ -742,7 +725,7 @@ def batch(
     same command to continue.
     """
     from .batch import BATCH_MARKS, BatchInterrupted, run_batch
-    from .config import load_settings
+    from .config import load_settings, states_init_error
 
     from .io.atomic import check_output_dir, check_own_folder
 
@@ -758,7 +741,8 @@ def batch(
     try:
         with _Progress(interactive) as progress:
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
-                          progress=lambda d, t: progress("entries", d, t))
+                          progress=lambda d, t: progress("entries", d, t),
+                          dataset_options=not states_init_error(config))
     except BatchInterrupted as exc:
         _report(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done "
                 f"(summary so far in {exc.summary}); rerun the same command to continue")

@@ -411,6 +411,54 @@ def _coerce(name: str, value: Any, annotation: str) -> Any:
     return value
 
 
+def dataset_settings(settings: Settings | None, options: dict,
+                     adopt: bool = True) -> Settings:
+    """The settings a dataset is calibrated with: ``settings`` with what the dataset states
+    about itself where the settings leave the default.
+
+    A dataset states its ``init_error`` (calib.yaml; ``options`` as
+    :func:`paretocal.io.source_options` returns them): how far off its initial extrinsics
+    may be, which sets the search box. It is taken when ``adopt`` and the settings'
+    ``init_error_deg`` and ``init_error_m`` are both the defaults: settings that changed
+    either keep theirs (the user's word wins over the dataset's).
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        None: the defaults.
+    options : dict
+        ``init_error`` as ``(deg, m)`` when the dataset states it.
+    adopt : bool
+        False: the settings are final. For settings that state ``init_error`` even at its
+        default values (``--init-error``, a config file that names it), and for settings
+        recorded after adoption (a resumed run).
+
+    Returns
+    -------
+    Settings
+    """
+    settings = settings or Settings()
+    s, default = settings.search, SearchSettings()
+    if (adopt and options.get("init_error") is not None
+            and (s.init_error_deg, s.init_error_m) == (default.init_error_deg,
+                                                       default.init_error_m)):
+        deg, m = options["init_error"]
+        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    return settings
+
+
+def states_init_error(path: str | Path | None) -> bool:
+    """Whether the config file ``path`` names ``search.init_error_deg`` or ``init_error_m``
+    (then the user set it, even to the default values: a dataset's own does not replace it,
+    see :func:`dataset_settings`)."""
+    from .io.readers import read_mapping
+
+    if path is None:
+        return False
+    search = read_mapping(Path(path)).get("search")
+    return isinstance(search, dict) and bool({"init_error_deg", "init_error_m"} & set(search))
+
+
 def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
     """Settings from a YAML/JSON config file laid out by section, over ``base``."""
     from .io.readers import read_mapping

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import project
-from .config import Settings
+from .config import Settings, dataset_settings
 from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
 from .inputs import prepare_lidar
@@ -54,7 +54,8 @@ RIG_JSON = "rig.json"
 def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None = None,
                   T_inits: dict[str, np.ndarray] | None = None,
                   cameras: list[str] | None = None, figures: bool = True,
-                  checkpoint_every: int = 5, progress=None, on_camera=None) -> dict:
+                  checkpoint_every: int = 5, progress=None, on_camera=None,
+                  dataset_options: bool = True) -> dict:
     """Calibrate the cameras of the rig folder ``source`` into ``out/<name>/`` and write
     ``out/rig.json`` (when more than one camera was calibrated).
 
@@ -64,7 +65,8 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         A rig folder (:func:`paretocal.io.rig_cameras`).
     out : path
     settings : Settings, optional
-        The same settings for every camera.
+        The same settings for every camera; what calib.yaml states (``init_error``) replaces
+        the defaults these leave (:func:`~paretocal.config.dataset_settings`).
     T_inits : dict, optional
         Initial ``T_cam_lidar`` by camera name; calib.yaml's for the cameras not in it.
     cameras : list of str, optional
@@ -73,15 +75,19 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         As for :func:`paretocal.rundir.calibrate_run`.
     on_camera : callable, optional
         ``on_camera(name, result)`` after each camera's run (for a line on the console).
+    dataset_options : bool
+        False: the settings are final (they state ``init_error`` even where it is the
+        default).
 
     Returns
     -------
     dict
         What rig.json holds (also when it is not written: one camera).
     """
-    settings = (settings or Settings()).validate()
     source, out = Path(source), Path(out)
     found = rig_cameras(source)
+    # Once for every camera; each run then takes the settings as they are.
+    settings = dataset_settings(settings, found[0][1].options, dataset_options).validate()
     names = [n for n, _ in found]
     T_inits = dict(T_inits or {})
     unknown = sorted(set(cameras or ()) - set(names)) + sorted(set(T_inits) - set(names))
@@ -105,7 +111,7 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
                                           frames=frames[name], figures=figures,
                                           checkpoint_every=checkpoint_every,
                                           progress=progress, rig_camera=name,
-                                          lidar=steps[key])
+                                          lidar=steps[key], dataset_options=False)
         except Interrupted as exc:
             exc.run_dir = out / name       # the run folder to resume
             raise

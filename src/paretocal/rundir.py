@@ -42,10 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Settings, settings_from_mapping
+from .config import Settings, dataset_settings, settings_from_mapping
 from .errors import InputError, Interrupted, ParetocalError
 from .geometry import check_rigid
-from .io import load_frames, rig_source
+from .io import load_frames, rig_source, source_options
 from .io.atomic import atomic_write_text, temporary_pattern
 from .io.frame import Frame
 from .io.paths import not_plain, odd_kind, open_plain
@@ -253,11 +253,12 @@ class _RunCheckpoint(Checkpoint):
         super().save(state, history)
 
 
-def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
-                  settings: Settings | None = None, frames: list[Frame] | None = None,
-                  figures: bool = True, checkpoint_every: int = 5,
-                  progress=None, rig_camera: str | None = None,
-                  lidar=None) -> CalibrationResult:
+def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
+        source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
+        settings: Settings | None = None, frames: list[Frame] | None = None,
+        figures: bool = True, checkpoint_every: int = 5, progress=None,
+        rig_camera: str | None = None, lidar=None, *,
+        dataset_options: bool = True) -> CalibrationResult:
     """Calibrate ``source`` into the run folder ``out``, resumable.
 
     Parameters
@@ -268,6 +269,9 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
         The run folder.
     T_init : ndarray, shape (4, 4), optional
     settings : Settings, optional
+        What ``source``'s calib.yaml states (``init_error``) replaces the defaults these leave
+        (:func:`~paretocal.config.dataset_settings`); the settings used are recorded for the
+        resume.
     frames : list of Frame, optional
         The frames already loaded from ``source`` (loaded here when omitted).
     figures : bool
@@ -281,6 +285,9 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
     lidar : LidarSteps, optional
         The LiDAR-only steps already done on ``frames``' clouds (see
         :func:`paretocal.calibrate`).
+    dataset_options : bool
+        False: the settings are final (they state ``init_error`` even where it is the
+        default, or were recorded after adoption: a resumed run).
 
     Raises
     ------
@@ -290,7 +297,7 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
         ``checkpoint`` is set when the run can be resumed (``SearchInterrupted`` during the
         search itself).
     """
-    settings = settings or Settings()
+    settings = dataset_settings(settings, source_options(source) if dataset_options else {})
     out = Path(out)
     if frames is None:
         try:
@@ -407,6 +414,8 @@ def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
     args = run_arguments(run_dir)
     if not os.path.lexists(Path(run_dir) / CHECKPOINT):
         log.warning("%s: no checkpoint; the run starts over", run_dir)
+    # The recorded settings are those the run used, the dataset's init_error already in them.
     return calibrate_run(args["source"], run_dir, args["T_init"], args["settings"],
                          figures=args["figures"], checkpoint_every=max(checkpoint_every, 1),
-                         progress=progress, rig_camera=args["rig_camera"])
+                         progress=progress, rig_camera=args["rig_camera"],
+                         dataset_options=False)

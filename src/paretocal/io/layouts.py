@@ -487,9 +487,7 @@ def _folder(root: Path) -> Source:
     if data.get("lidar_pose") is not None:
         pose = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
     layout = _points_layout(cpath, data.get("points"))
-    options = {}
-    if data.get("init_error") is not None:
-        options["init_error"] = _init_error(cpath, data["init_error"])
+    options = _options(cpath, data)
     pairs = _pair(root, root / "images", root / "points")
     credit = _credit(cpath, data)
     return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
@@ -614,12 +612,10 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
     if clash:
         raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
                          "given; with several cameras each entry of cameras holds its own")
-    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")), "options": {},
-              "credit": _credit(cpath, data)}
+    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")),
+              "options": _options(cpath, data), "credit": _credit(cpath, data)}
     if data.get("lidar_pose") is not None:
         shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
-    if data.get("init_error") is not None:
-        shared["options"]["init_error"] = _init_error(cpath, data["init_error"])
     return [(name, _rig_camera(root, cpath, name, entry, shared)) for name, entry in entries]
 
 
@@ -646,6 +642,26 @@ def _points_layout(cpath: Path, section) -> str | None:
         raise InputError(f"{cpath}: points.layout {quote(name)} is not one of "
                          f"{', '.join(BIN_LAYOUTS)}")
     return str(name).lower()
+
+
+def _options(cpath: Path, data: dict) -> dict:
+    """What calib.yaml states about the dataset (:attr:`Source.options`)."""
+    if data.get("init_error") is None:
+        return {}
+    return {"init_error": _init_error(cpath, data["init_error"])}
+
+
+def source_options(source: str | Path | Source) -> dict:
+    """What a dataset states about itself (:attr:`Source.options`: calib.yaml's
+    ``init_error`` as ``(deg, m)``), read from its calib.yaml alone: no frame is listed, so
+    nothing is said twice. A source with no calib.yaml (KITTI) states nothing; a rig folder
+    states it for all its cameras."""
+    if isinstance(source, Source):
+        return dict(source.options)
+    cpath = Path(source) / "calib.yaml"
+    if not cpath.is_file():
+        return {}
+    return _options(cpath, read_mapping(cpath))
 
 
 def _init_error(cpath: Path, value) -> tuple[float, float]:
