@@ -81,8 +81,9 @@ START_BOX = np.r_[[0.05] * 3, [0.5] * 3]
 def basin(frames, T_ref: np.ndarray, settings: Settings, rings=None) -> dict:
     """The objective's basin at ``T_ref`` on ``frames``: the local optimum polished from
     ``T_ref`` (``deg``, ``cm``, ``px``), the centre of the optima polished from :data:`STARTS`
-    starts about it (``centre_deg``, ``centre_cm``) and the share of grid neighbours that score
-    better (``better``)."""
+    starts about it (``centre_deg``, ``centre_cm``) and their median distance from it
+    (``spread_deg``, ``spread_cm``: large where the objective is flat), and the share of grid
+    neighbours that score better (``better``)."""
     stage = Stage(frames, T_ref, T_ref, settings, rings=rings)
     obj = stage.objective
     x0 = np.zeros(7)
@@ -94,11 +95,16 @@ def basin(frames, T_ref: np.ndarray, settings: Settings, rings=None) -> dict:
     T_opt = obj.transforms(Z)
     e = pose_error(T_opt[0], T_ref)
     d = np.array([correction_between(T_ref, T) for T in T_opt])
-    c = pose_error(T_ref @ correction_matrix(d.mean(axis=0)), T_ref)
+    centre = T_ref @ correction_matrix(d.mean(axis=0))
+    c = pose_error(centre, T_ref)
+    # How far the optima lie from their centre: where the objective is flat they scatter.
+    spread = [pose_error(T, centre) for T in T_opt]
     counts = [f.counts() for f in stage.feats]
     return {"deg": float(e["rotation_deg"]), "cm": float(e["translation_cm"]),
             "px": float(displacement_px(obj, x0, Z[0])), "better": float(frac),
             "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
+            "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
+            "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
             "correction": [round(float(v), 5) for v in d[0]],
             "points_per_frame": {g: round(float(np.mean([c[g] for c in counts])), 1)
                                  for g in counts[0]}}
@@ -128,9 +134,9 @@ def measure(name: str, settings: Settings, groups: list[str], single: bool) -> d
 
 def table(results: dict) -> str:
     lines = ["| set | frames | group | optimum deg | cm | px | centre deg / cm | "
-             "neighbours better | single frame: optimum deg / cm (median, worst) | "
-             "better (median) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "spread deg / cm | neighbours better | single frame: optimum deg / cm (median, "
+             "worst) | better (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in results.items():
         for g, row in r["groups"].items():
             s = row.get("single")
@@ -139,6 +145,7 @@ def table(results: dict) -> str:
             better1 = f"{100 * s['better']['median']:.0f} %" if s else ""
             lines.append(f"| {name} | {r['frames']} | {g} | {row['deg']:.2f} | {row['cm']:.1f} | "
                          f"{row['px']:.1f} | {row['centre_deg']:.2f} / {row['centre_cm']:.1f} | "
+                         f"{row['spread_deg']:.2f} / {row['spread_cm']:.1f} | "
                          f"{100 * row['better']:.0f} % | {one} | {better1} |")
     return "\n".join(lines)
 

@@ -33,7 +33,7 @@ def test_the_basin_is_at_the_reference_and_not_at_a_pose_beside_it(basin_bench, 
     T = frames[0].T_ref
     at = basin_bench.basin(frames, T, Settings())
     assert at["deg"] < 0.4 and at["cm"] < 4 and at["better"] <= 0.05
-    assert at["centre_deg"] < 0.4 and at["centre_cm"] < 4
+    assert at["centre_deg"] < 0.4 and at["centre_cm"] < 4 and at["spread_cm"] < 4
     assert set(at["points_per_frame"]) == {"depth_edge", "intensity_edge", "smooth"}
     off = basin_bench.basin(frames, T @ correction_matrix([0, 0, 0, 1.5, 0, 0]), Settings())
     assert 1.0 < off["deg"] < 2.0 and off["better"] > 0.2
@@ -42,7 +42,9 @@ def test_the_basin_is_at_the_reference_and_not_at_a_pose_beside_it(basin_bench, 
 
 def test_the_table_has_a_row_per_set_and_group(basin_bench):
     row = {"deg": 0.1, "cm": 1.0, "px": 2.0, "better": 0.01, "centre_deg": 0.12,
-           "centre_cm": 1.1, "correction": [0] * 6, "points_per_frame": {}}
+           "centre_cm": 1.1, "spread_deg": 0.05, "spread_cm": 0.5, "correction": [0] * 6,
+           "points_per_frame": {}}
     text = basin_bench.table({"a": {"frames": 3, "groups": {"all": row, "depth": row}}})
     lines = text.splitlines()
-    assert len(lines) == 4 and lines[2].startswith("| a | 3 | all | 0.10 | 1.0 | 2.0 | 0.12 / 1.1")
+    assert len(lines) == 4 and lines[2].startswith(
+        "| a | 3 | all | 0.10 | 1.0 | 2.0 | 0.12 / 1.1 | 0.05 / 0.5 |")
