@@ -4,6 +4,8 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 DATA   ?= $(or $(PARETOCAL_DATA),../shared/data)
 RUN    ?= runs/demo
+# The start is written beside the run folder: --out refuses a folder holding other files.
+INIT   ?= $(RUN)_init.yaml
 
 .PHONY: demo test bench clean
 
@@ -15,8 +17,9 @@ $(BIN)/paretocal: pyproject.toml
 
 # A full calibration of the 20 bundled KITTI raw frames from a perturbed initial extrinsic.
 demo: $(BIN)/paretocal
-	$(BIN)/paretocal perturb $(DATA)/kitti_raw/2011_09_26 --rot 5 --trans 0.2 --seed 1000 --out $(RUN)/init.yaml
-	$(BIN)/paretocal calibrate $(DATA)/kitti_raw/2011_09_26 --init $(RUN)/init.yaml --out $(RUN)
+	@mkdir -p $(dir $(INIT))
+	$(BIN)/paretocal perturb $(DATA)/kitti_raw/2011_09_26 --rot 5 --trans 0.2 --seed 1000 --out $(INIT)
+	$(BIN)/paretocal calibrate $(DATA)/kitti_raw/2011_09_26 --init $(INIT) --out $(RUN)
 
 test: $(BIN)/paretocal
 	PARETOCAL_DATA=$(DATA) $(BIN)/python -m pytest

@@ -23,13 +23,23 @@ Datasets (``--source`` takes any folder ``paretocal`` reads):
   of a generic folder links every entry of the folder (symbolic links resolved, including the
   one-line files that stand for a link where links were not kept) and rewrites ``calib.yaml``
   with ``T_cam_lidar`` set to the start, every other key unchanged;
-* ``--variant NAME[,NAME...]`` (repeatable): rig variants of a KITTI source (``paretocal.testing``)
+* ``--variant NAME[,NAME...]`` (repeatable): rig variants of the source (``paretocal.testing``)
   written as generic folders: ``32beam`` / ``16beam`` (every 2nd / 4th ring), ``firing``
-  (column-major order), ``shuffled`` (random order), ``vehicle`` (the cloud in a vehicle frame,
-  the sensor 1.5 m from its origin; the reference becomes ``T_cam_lidar @ inv(sensor_pose)`` and
-  ``calib.yaml`` gets ``lidar_pose``; ``vehicle+nopose`` leaves it out, so the pose is
-  estimated from the sweep), ``generic`` (unchanged, as a generic folder); ``a+b``
-  applies ``a`` then ``b``. Each variant is a dataset of its own, with the same trial seeds.
+  (column-major order), ``packet`` (packet order with per-laser azimuth offsets, as an
+  HDL-64E S2/S3 or Pandar64 driver writes it), ``shuffled`` (random order), ``vehicle`` (the
+  cloud in a vehicle frame, the sensor 1.5 m from its origin; the reference becomes
+  ``T_cam_lidar @ inv(sensor_pose)`` and ``calib.yaml`` gets ``lidar_pose``; ``vehicle+nopose``
+  leaves it out, so the pose is estimated from the sweep), ``generic`` (unchanged, as a generic
+  folder); ``a+b`` applies ``a`` then ``b``. Each variant is a dataset of its own, with the same
+  trial seeds, holding the frames of ``--frames`` only (the runs then take all of them).
+
+  A KITTI source's rings are exact (its scan order). A generic source (PandaSet, aiMotive) has
+  no ring field: its rings are those the tool's own recovery finds in the sensor's frame
+  (``paretocal.testing.recovered_truth``, the sensor located as the tool locates it, the rings
+  judged near the camera's view at the reference). Its variant keeps the cloud in the source's
+  frame (``lidar_pose`` only where the source's calib.yaml gives one, so the tool still locates
+  the LiDAR), the points in ``.pcd`` (x, y, z, intensity, and time where the source has it),
+  the images linked and every other calib.yaml key and folder entry the source's.
 
 The figures the project reports (``DATA`` is the sample data folder, ``../shared/data``):
 
@@ -47,8 +57,12 @@ The figures the project reports (``DATA`` is the sample data folder, ``../shared
         --trials 10 --rot 10 --trans 0.25 --json runs/acc_aim_fisheye_10.json
     # KITTI rig variants, 20 frames, +-5 deg / +-0.2 m, 5 trials each
     .venv/bin/python benchmarks/accuracy.py \\
-        --variant 32beam,16beam,firing,shuffled,vehicle,vehicle+nopose --trials 5 \\
+        --variant 32beam,16beam,firing,packet,shuffled,vehicle,vehicle+nopose --trials 5 \\
         --rot 5 --trans 0.2 --json runs/acc_variants_5.json
+    # PandaSet front camera variants, the frames of the standing car
+    .venv/bin/python benchmarks/accuracy.py --source DATA/pandaset/front --frames 0:12 \\
+        --variant packet,shuffled,32beam,16beam --trials 5 --rot 5 --trans 0.2 \\
+        --json runs/acc_pandaset_variants_5.json
     # KITTI raw drive, 2 frames (0 and 10), +-3 deg / +-0.1 m, 10 trials
     .venv/bin/python benchmarks/accuracy.py --frames 0,10 --trials 10 --rot 3 --trans 0.1 \\
         --json runs/acc_kitti_2frames_3.json
@@ -106,13 +120,15 @@ def _variant_steps():
         "32beam": lambda v, k: T.decimate(v, 2),
         "16beam": lambda v, k: T.decimate(v, 4),
         "firing": lambda v, k: T.firing_order(v),
+        # One sensor, one set of laser offsets: the same for every frame.
+        "packet": lambda v, k: T.packet_order(v),
         "shuffled": lambda v, k: T.shuffled(v, k),
         "vehicle": lambda v, k: T.to_vehicle_frame(v),
         "nopose": lambda v, k: v,
     }
 
 
-VARIANTS = ("generic", "32beam", "16beam", "firing", "shuffled", "vehicle", "nopose")
+VARIANTS = ("generic", "32beam", "16beam", "firing", "packet", "shuffled", "vehicle", "nopose")
 
 
 def parse_variants(values: list[str] | None) -> list[str]:
@@ -130,16 +146,74 @@ def parse_variants(values: list[str] | None) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def make_variant(points: np.ndarray, name: str, k: int = 0):
-    """The sweep ``points`` (KITTI scan order) as variant ``name``: a
-    :class:`paretocal.testing.Variant` (points in the variant's order, sensor pose)."""
-    from paretocal.testing import kitti_truth
+def make_variant(points, name: str, k: int = 0):
+    """The sweep as variant ``name``: a :class:`paretocal.testing.Variant` (points in the
+    variant's order, sensor pose). ``points``: a KITTI sweep in its scan order (N, 4), or a
+    sweep with its truth already made (a ``Variant``, see :func:`generic_truth`)."""
+    from paretocal.testing import Variant, kitti_truth
 
     steps = _variant_steps()
-    v = kitti_truth(points)
+    v = points if isinstance(points, Variant) else kitti_truth(points)
     for step in name.split("+"):
         v = steps[step](v, k)
     return v
+
+
+def located_pose(frames, settings=None) -> np.ndarray:
+    """The LiDAR's pose in the clouds' frame as the tool finds it
+    (:func:`paretocal.inputs.locate_lidar`: calib.yaml's ``lidar_pose``, the cloud's own
+    origin, or estimated from the first sweep), shape (4, 4), cloud <- sensor."""
+    from paretocal.config import Settings
+    from paretocal.inputs import locate_lidar
+
+    moved, info, _ = locate_lidar(list(frames), settings or Settings())
+    if info["source"] == "unknown":
+        raise SystemExit(f"accuracy.py: {frames[0].points_path}: the LiDAR's pose is not "
+                         f"known, so the sweep has no truth: {info.get('reason', '')}")
+    pose = moved[0].sensor_pose
+    return np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
+
+
+def generic_truth(loaded: list) -> list:
+    """The sweeps of a generic source's frames with the rings the tool's own recovery finds
+    (:func:`paretocal.testing.recovered_truth`): about the sensor as the tool locates it, judged
+    near the camera's view at the reference (as the tool judges them). One Variant per frame,
+    in the cloud's frame with its stored order; ``time`` the file's where it has one."""
+    from paretocal.config import FeatureSettings
+    from paretocal.features.prepare import view_mask
+    from paretocal.testing import recovered_truth
+
+    pose = located_pose(loaded)
+    out = []
+    for k, f in enumerate(loaded):
+        view = view_mask(f, [(f.camera, f.T_ref)], FeatureSettings())
+        try:
+            out.append(recovered_truth(f.points, pose, k, f.time, view))
+        except ValueError as exc:
+            raise SystemExit(f"accuracy.py: {f.points_path}: no truth for a variant: {exc}") \
+                from None
+    return out
+
+
+def write_pcd(path: Path, points: np.ndarray, time: np.ndarray | None = None) -> None:
+    """A binary PCD of ``points`` (N, 4) float32 x, y, z, intensity, and float64 ``time`` (s,
+    shape (N,)) when given."""
+    n = len(points)
+    fields = [("x", "f4"), ("y", "f4"), ("z", "f4"), ("intensity", "f4")]
+    if time is not None:
+        fields.append(("time", "f8"))
+    rec = np.empty(n, dtype=fields)
+    for j, c in enumerate("xyz"):
+        rec[c] = points[:, j]
+    rec["intensity"] = points[:, 3]
+    if time is not None:
+        rec["time"] = time
+    names = " ".join(name for name, _ in fields)
+    head = (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {names}\n"
+            f"SIZE {' '.join(t[1:] for _, t in fields)}\nTYPE {' '.join('F' for _ in fields)}\n"
+            f"COUNT {' '.join('1' for _ in fields)}\nWIDTH {n}\nHEIGHT 1\n"
+            f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n")
+    Path(path).write_bytes(head.encode("ascii") + rec.tobytes())
 
 
 def _rows(T) -> list[list[float]]:
@@ -147,48 +221,95 @@ def _rows(T) -> list[list[float]]:
 
 
 def build_variant(source: Path, name: str, dst: Path, frames: str | None = None,
-                  camera: int = 2) -> tuple[Path, np.ndarray, np.ndarray]:
-    """A generic folder at ``dst`` holding the KITTI ``source``'s frames as variant ``name``.
+                  camera: int = 2, cache: dict | None = None
+                  ) -> tuple[Path, np.ndarray, np.ndarray]:
+    """A generic folder at ``dst`` holding the ``source``'s frames as variant ``name``.
 
-    Images are symbolic links (KITTI's are rectified: the camera is the pinhole ``K`` of the
-    rectified camera), points float32 ``.bin`` (x, y, z, intensity) in the variant's order;
-    ``calib.yaml`` holds the camera, the reference ``T_cam_lidar`` (for a cloud moved to a
-    vehicle frame ``T_ref @ inv(sensor_pose)``) and, when the sensor is not at the cloud's
-    origin, ``lidar_pose`` (the LiDAR's pose in the cloud's frame, 4x4).
+    Images are symbolic links. For a KITTI source (rectified images: the camera is the pinhole
+    ``K`` of the rectified camera) the points are float32 ``.bin`` (x, y, z, intensity) in the
+    variant's order; ``calib.yaml`` holds the camera, the reference ``T_cam_lidar`` (for a cloud
+    moved to a vehicle frame ``T_ref @ inv(sensor_pose)``) and, when the sensor is not at the
+    cloud's origin, ``lidar_pose`` (the LiDAR's pose in the cloud's frame, 4x4). A generic
+    source is written as its module docstring says. ``cache``: a dict shared by the variants
+    of one source, so that its frames are read and its truth made once.
 
-    Returns the folder, its reference extrinsic and the sensor pose (identity unless moved).
+    Returns the folder, its reference extrinsic and the LiDAR's pose in the variant's cloud
+    frame (a KITTI source's: identity unless moved to a vehicle frame; a generic source's:
+    where the tool locates it, moved with the cloud).
     """
-    src = detect_source(Path(source), camera)
-    if src.layout not in ("kitti_raw", "kitti_object"):
-        raise SystemExit(f"accuracy.py: --variant needs a KITTI source (scan-ordered HDL-64E "
-                         f"sweeps), not the {src.layout} layout of {source}")
-    loaded = load_frames(source, frames, camera)
+    key = (str(Path(source).resolve()), frames, camera)
+    if cache is not None and key in cache:
+        src, loaded, truths = cache[key]
+    else:
+        src = detect_source(Path(source), camera)
+        loaded = load_frames(source, frames, camera)
+        truths = None
     T_src = loaded[0].T_ref
-    if any(not np.allclose(f.T_ref, T_src, atol=1e-9) for f in loaded):
+    if T_src is None:
+        raise SystemExit(f"accuracy.py: {source} has no T_cam_lidar: no reference to measure "
+                         "against")
+    if any(f.T_ref is None or not np.allclose(f.T_ref, T_src, atol=1e-9) for f in loaded):
         raise SystemExit(f"accuracy.py: {source}: the frames' extrinsics differ; a variant "
                          "folder holds one calibration")
-    cam = loaded[0].camera
+    kitti = src.layout in ("kitti_raw", "kitti_object")
+    if truths is None:
+        truths = [f.points for f in loaded] if kitti else generic_truth(loaded)
+        if cache is not None:
+            cache[key] = (src, loaded, truths)
     (dst / "images").mkdir(parents=True)
     (dst / "points").mkdir()
-    pose = None
-    for k, f in enumerate(loaded):
-        v = make_variant(f.points, name, k)
-        if pose is None:
-            pose = v.sensor_pose
-        v.points.astype(np.float32).tofile(dst / "points" / f"{f.name}.bin")
+    moved = sensor = None
+    for k, (f, truth) in enumerate(zip(loaded, truths)):
+        v = make_variant(truth, name, k)
+        if moved is None:
+            # The variant's sensor pose over the source's: what the variant did to the cloud.
+            sensor = v.sensor_pose
+            moved = sensor @ invert(np.eye(4) if kitti else truth.sensor_pose)
+        if kitti:
+            v.points.astype(np.float32).tofile(dst / "points" / f"{f.name}.bin")
+        else:
+            write_pcd(dst / "points" / f"{f.name}.pcd", v.points,
+                      None if f.time is None else v.time)
         image = Path(f.image_path).resolve()
         (dst / "images" / f"{f.name}{image.suffix.lower()}").symlink_to(image)
-    T_ref = T_src @ invert(pose)
-    calib = {"camera": {"model": "pinhole", "K": _rows(cam.K), "width": int(cam.width),
-                        "height": int(cam.height)},
-             "T_cam_lidar": _rows(T_ref)}
-    if not np.allclose(pose, np.eye(4)) and "nopose" not in name.split("+"):
-        calib["lidar_pose"] = _rows(pose)
-    header = (f"# KITTI frames of {Path(source).resolve()} as rig variant '{name}'\n"
-              "# (paretocal.testing); T_cam_lidar is KITTI's reference in the cloud's frame.\n")
+    T_ref = T_src @ invert(moved)
+    keep_pose = "nopose" not in name.split("+")
+    if kitti:
+        calib = {"camera": {"model": "pinhole", "K": _rows(loaded[0].camera.K),
+                            "width": int(loaded[0].camera.width),
+                            "height": int(loaded[0].camera.height)},
+                 "T_cam_lidar": _rows(T_ref)}
+        if not np.allclose(moved, np.eye(4)) and keep_pose:
+            calib["lidar_pose"] = _rows(moved)
+        what = "KITTI frames"
+    else:
+        calib = _generic_calib(src.root, dst, T_ref, moved, keep_pose)
+        what = "frames"
+    header = (f"# {what} of {Path(source).resolve()} as rig variant '{name}'\n"
+              "# (paretocal.testing); T_cam_lidar is the reference in the cloud's frame.\n")
     (dst / "calib.yaml").write_text(header + yaml.safe_dump(calib, sort_keys=False,
                                                             default_flow_style=None))
-    return dst, T_ref, pose
+    return dst, T_ref, sensor
+
+
+def _generic_calib(root: Path, dst: Path, T_ref: np.ndarray, moved: np.ndarray,
+                   keep_pose: bool) -> dict:
+    """The calib.yaml of a generic source's variant: the source's keys with the reference in
+    the variant's frame and its ``lidar_pose`` (when it gives one) moved with the cloud; every
+    folder entry other than calib.yaml, images and points linked, so relative references
+    (masks, camera_info files) still hold."""
+    data = dict(read_mapping(root / "calib.yaml"))
+    for entry in sorted(root.iterdir()):
+        if entry.name not in ("calib.yaml", "images", "points"):
+            target = resolve_entry(entry)
+            (dst / entry.name).symlink_to(target, target_is_directory=target.is_dir())
+    data["T_cam_lidar"] = _rows(T_ref)
+    if data.get("lidar_pose") is not None:
+        if keep_pose:
+            data["lidar_pose"] = _rows(moved @ np.asarray(data["lidar_pose"], dtype=np.float64))
+        else:
+            del data["lidar_pose"]
+    return data
 
 
 # --- blind copies ---------------------------------------------------------------------------
@@ -313,6 +434,8 @@ class Dataset:
     variant: str | None = None
     sensor_pose: np.ndarray | None = None   #: the LiDAR's pose in the cloud's frame, if moved
     rows: list = field(default_factory=list)
+    #: The folder holds the selected frames only (a variant): the runs take all of them.
+    all_frames: bool = False
 
 
 def layout_of(path: Path) -> str:
@@ -332,10 +455,10 @@ def make_copy(ds: Dataset, T: np.ndarray, dst: Path) -> Path:
     return blind_copy_folder(ds.path, T, dst)
 
 
-def calibrate_options(args) -> list[str]:
+def calibrate_options(args, ds: Dataset | None = None) -> list[str]:
     """The options passed to ``paretocal calibrate`` beyond source, init and out."""
     opts = []
-    if args.frames:
+    if args.frames and not (ds is not None and ds.all_frames):
         opts += ["--frames", args.frames]
     if args.config:
         opts += ["--config", args.config]
@@ -358,17 +481,21 @@ def trial_start(k: int, args, T_ref: np.ndarray) -> np.ndarray:
 
 
 def _run_api(args, ds: Dataset, view: Path, T_init: np.ndarray) -> dict:
+    import dataclasses
+
     from paretocal import calibrate
-    from paretocal.config import Settings, load_settings
+    from paretocal.config import Settings, load_settings, states_init_error
     from paretocal.errors import ParetocalError
 
     settings = load_settings(args.config) if args.config else Settings()
     if args.init_error:
         deg, m = (float(v) for v in init_error_text(args).split(","))
         settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    settings = dataclasses.replace(settings, frames=None if ds.all_frames else args.frames)
     try:
-        frames = load_frames(view, args.frames)
-        r = calibrate(frames, T_init, settings)
+        # The folder itself, so that its calib.yaml's init_error applies as on the CLI.
+        r = calibrate(view, T_init, settings, dataset_options=not (
+            args.init_error or states_init_error(args.config)))
     except ParetocalError as exc:
         return {"exit": 2, "error": str(exc)}
     rel = r.reliability or {}
@@ -382,7 +509,7 @@ def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
     write_extrinsic(init, T_init)
     run = trial / "run"
     cmd = [sys.executable, "-m", "paretocal.cli", "calibrate", str(data), "--init", str(init),
-           "--out", str(run), "--quiet", "--no-figures"] + calibrate_options(args)
+           "--out", str(run), "--quiet", "--no-figures"] + calibrate_options(args, ds)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode in (130, -2):
         raise KeyboardInterrupt
@@ -621,13 +748,15 @@ def datasets(args, work: Path) -> list[Dataset]:
         raise SystemExit(f"accuracy.py: {source}: not found")
     variants = parse_variants(args.variant)
     if variants:
-        out = []
+        out, cache = [], {}
+        kind = {"kitti_object": "KITTI object", "kitti_raw": "KITTI raw"}.get(
+            layout_of(source), f"folder {source}")
         for name in variants:
-            folder, T_ref, pose = build_variant(source, name, work / "variants" / name)
+            folder, T_ref, pose = build_variant(source, name, work / "variants" / name,
+                                                args.frames, cache=cache)
             moved = None if np.allclose(pose, np.eye(4)) else pose
-            label = f"{'KITTI object' if layout_of(source) == 'kitti_object' else 'KITTI raw'}" \
-                    f" variant {name}"
-            out.append(Dataset(label, "folder", folder, T_ref, name, moved))
+            out.append(Dataset(f"{kind} variant {name}", "folder", folder, T_ref, name, moved,
+                               all_frames=True))
         return out
     layout = layout_of(source)
     if layout == "folder":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import signal
 from pathlib import Path
 
 import cv2
@@ -103,3 +104,9 @@ def bad_cli(capfd, *args, expect: str | tuple[str, ...]) -> str:
     assert "Traceback" not in err
     return lines[0]
 
+
+def default_sigint() -> None:
+    """``preexec_fn`` for a child process a test sends SIGINT: a test session started in the
+    background (``nohup``, ``&`` in a script) has SIGINT ignored, children inherit that and
+    paretocal rightly keeps it; the child starts with the default action, as from a terminal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

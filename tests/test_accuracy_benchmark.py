@@ -37,7 +37,7 @@ def _start(T_ref):
     return T_ref @ invert(correction_matrix([0.1, -0.05, 0.2, 3.0, -2.0, 1.5]))
 
 
-@pytest.mark.parametrize("name", ["32beam", "16beam", "firing", "shuffled", "vehicle",
+@pytest.mark.parametrize("name", ["32beam", "16beam", "firing", "packet", "shuffled", "vehicle",
                                   "16beam+vehicle"])
 def test_variant_folder_reads_back(acc, raw_date, two_frames, tmp_path, name):
     folder, T_ref, pose = acc.build_variant(raw_date, name, tmp_path / name, frames="0,10")
@@ -66,6 +66,54 @@ def test_variant_folder_reads_back(acc, raw_date, two_frames, tmp_path, name):
         np.testing.assert_allclose(pose, np.eye(4))
         np.testing.assert_allclose(T_ref, two_frames[0].T_ref, atol=1e-12)
         assert "lidar_pose" not in calib
+
+
+def test_variants_of_a_generic_folder(acc, two_frames, tmp_path):
+    """A generic source's variants: its truth from the ring recovery about the sensor as the
+    tool locates it (here KITTI sweeps in a folder: the exact rings), the points as PCD in the
+    source's frame, calib.yaml the source's apart from the moved reference."""
+    from paretocal.testing import kitti_truth, ring_accuracy
+
+    from .helpers import write_generic
+
+    src = write_generic(tmp_path / "src", two_frames)
+    calib = read_mapping(src / "calib.yaml")
+    calib.update(init_error=[2.0, 0.05], note="kept")
+    (src / "calib.yaml").write_text(yaml.safe_dump(calib))
+    cache = {}
+    for name in ("packet", "32beam+shuffled", "vehicle"):
+        folder, T_ref, pose = acc.build_variant(src, name, tmp_path / name, cache=cache)
+        back = load_frames(folder)
+        assert [f.points_path.suffix for f in back] == [".pcd", ".pcd"]
+        again = read_mapping(folder / "calib.yaml")
+        assert {k: v for k, v in again.items() if k != "T_cam_lidar"} == \
+            {k: v for k, v in calib.items() if k != "T_cam_lidar"}    # no lidar_pose added
+        np.testing.assert_allclose(again["T_cam_lidar"], T_ref, atol=1e-12)
+        for k, (orig, f) in enumerate(zip(two_frames, back)):
+            truth = acc.generic_truth([orig])[0]
+            assert ring_accuracy(truth.ring, kitti_truth(orig.points).ring) >= 0.99
+            v = acc.make_variant(truth, name, k)
+            np.testing.assert_array_equal(f.points, v.points)
+            assert len(f.points) < 0.6 * len(orig.points) if "32beam" in name else \
+                len(f.points) == len(orig.points)
+        if name == "vehicle":
+            assert not np.allclose(pose, np.eye(4))
+            np.testing.assert_allclose(T_ref, two_frames[0].T_ref @ invert(pose), atol=1e-12)
+        else:
+            np.testing.assert_allclose(pose, np.eye(4))         # located at the cloud's origin
+            np.testing.assert_allclose(T_ref, two_frames[0].T_ref, atol=1e-12)
+
+
+def test_located_pose_is_the_tools(acc, two_frames):
+    import dataclasses
+
+    from paretocal.testing import kitti_truth, to_vehicle_frame
+
+    # KITTI's clouds are in the sensor's frame; a pose calib.yaml gives is taken as it is.
+    np.testing.assert_array_equal(acc.located_pose(two_frames[:1]), np.eye(4))
+    P = to_vehicle_frame(kitti_truth(two_frames[0].points)).sensor_pose
+    moved = [dataclasses.replace(two_frames[0], sensor_pose=P)]
+    np.testing.assert_array_equal(acc.located_pose(moved), P)
 
 
 def test_vehicle_reference_keeps_the_pixels(acc, raw_date, two_frames, tmp_path):

@@ -10,14 +10,17 @@ code (libpng, OpenCV) would count as a second line.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import errno
 import json
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import tracemalloc
 from types import SimpleNamespace
 
@@ -32,7 +35,7 @@ from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
-from .helpers import bad_cli as bad, run_cli as run, write_generic
+from .helpers import bad_cli as bad, default_sigint, run_cli as run, write_generic
 
 FAST = ["--pop", "16", "--gens", "3", "--no-polish", "--frames", "0:2", "--no-figures",
         "--checkpoint-every", "0"]
@@ -958,3 +961,416 @@ def test_check_without_an_extrinsic_on_a_dataset_without_one(capfd, tmp_path, ra
     bad(capfd, "check", folder,
         expect=(f"{folder}: the dataset has no extrinsic of its own (T_cam_lidar in "
                 "calib.yaml); pass --extrinsic FILE"))
+
+
+# --- sizes, excerpts and start-up -------------------------------------------------------------
+# A file's contents reach a message only as a short excerpt; what a header claims is checked
+# before anything is allocated for it; an interrupt while the command line starts prints one line.
+
+SHADOW = ("root:$6$Zq0sAlt$0123456789abcdefHASHhashHASH:19000:0:99999:7:::\n"
+          "alice:$6$pepper$secretSECRETsecret/0123456789:19000:0:99999:7:::\n")
+
+
+@pytest.mark.parametrize("option, expect", [
+    ("--init", "no extrinsic found (keys: 2 not shown (not plain names)); expected T_cam_lidar"),
+    ("--config", "unknown section(s) 2 not shown (not plain names) (known: "),
+])
+def test_a_colon_separated_text_file_is_not_echoed(capfd, tmp_path, rig, option, expect):
+    """Each line of /etc/shadow ends in ':', so YAML reads it as a key: the keys used to be
+    listed in the message, whole."""
+    path = tmp_path / "shadow"
+    path.write_text(SHADOW)
+    line = bad(capfd, "calibrate", rig, option, path, "--out", tmp_path / "o", *FAST,
+               expect=(str(path), expect))
+    assert "$6$" not in line and "secret" not in line and "alice" not in line
+
+
+def test_values_of_a_file_are_quoted_short_and_on_one_line(capfd, tmp_path, rig):
+    """A value in a message is a bounded excerpt with its control characters escaped: no
+    second line, no terminal escape sequence, however long the value."""
+    _edit_calib(rig, lambda c: c["camera"].update(width="wide\n\x1b[2J" + "w" * 100_000))
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+               expect="camera.width must be a positive whole number of pixels, got 'wide\\n\\x1b[2J")
+    assert len(line) < 300 and "\x1b" not in line
+    _edit_calib(rig, lambda c: c["camera"].update(width=1242))
+    many = {f"key{k}": k for k in range(10_000)}
+    path = tmp_path / "init.yaml"
+    path.write_text(yaml.safe_dump(many))
+    line = bad(capfd, "calibrate", rig, "--init", path, "--out", tmp_path / "o", *FAST,
+               expect="no extrinsic found (keys: key0, key1, ")
+    assert len(line) < 500 and "more)" in line
+
+
+def test_a_batch_reason_is_one_bounded_line(tmp_path, rig, monkeypatch):
+    """The reason of a failed entry goes into summary.csv and summary.parquet: the same
+    excerpt as on the command line, and any exception's message on one bounded line."""
+    import pyarrow.parquet as pq
+
+    from paretocal import batch
+    from paretocal.errors import MESSAGE_CHARS
+
+    init = tmp_path / "shadow"
+    init.write_text(SHADOW)
+    records = [batch.run_entry(batch.Entry(id="leaky", source=str(rig), init=str(init)),
+                               Settings().to_dict(), str(tmp_path / "out"), check=False)]
+
+    def odd(*args, **kwargs):
+        raise ValueError("first line\nsecond line " + "x" * 10_000)
+    monkeypatch.setattr("paretocal.pipeline.calibrate", odd)
+    records.append(batch.run_entry(batch.Entry(id="odd", source=str(rig)), Settings().to_dict(),
+                                   str(tmp_path / "out"), check=False))
+    batch.write_summary(batch.summary_rows(records), tmp_path)
+    reasons = pq.read_table(tmp_path / "summary.parquet").to_pydict()["reason"]
+    assert reasons[0].startswith(f"{init}: no extrinsic found (keys: 2 not shown")
+    assert reasons[1].startswith("unexpected ValueError: first line\\nsecond line xxx")
+    for reason in reasons:
+        assert "\n" not in reason and len(reason) <= MESSAGE_CHARS and "$6$" not in reason
+    text = (tmp_path / "summary.csv").read_text()
+    assert "$6$" not in text and len(text.splitlines()) == 3
+
+
+def _npy_claiming(path, shape, dtype="<f8", data=b"\0" * 64):
+    """A .npy file whose header says ``shape`` of ``dtype`` followed by ``data``."""
+    buf = __import__("io").BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": dtype, "fortran_order": False,
+                                               "shape": shape})
+    path.write_bytes(buf.getvalue() + data)
+
+
+@pytest.mark.parametrize("shape, expect", [
+    ((10**12, 4), "1,000,000,000,000 points by its header (shape (1000000000000, 4), float64), "
+                  "more than the 33,554,432 a point cloud file may hold"),
+    ((1000, 4), "the .npy header says shape (1000, 4) of float64 (32,000 bytes), but 64 bytes "
+                "of data follow; the file is truncated or its header is wrong"),
+    ((10**6, 10**4), "80,000,000,000 bytes of point data by its header (shape (1000000, 10000), "
+                     "float64), more than the 2 GiB a point cloud file may hold"),
+])
+def test_an_npy_header_claiming_too_much_is_refused_before_reading(capfd, tmp_path, rig,
+                                                                   raw_frames, shape, expect):
+    (rig / "points" / f"{_stem(raw_frames)}.bin").unlink()
+    path = rig / "points" / f"{_stem(raw_frames)}.npy"
+    _npy_claiming(path, shape)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(path), expect))
+
+
+def _pcd(header: str, data: bytes = b"") -> bytes:
+    return ("VERSION 0.7\n" + header + "VIEWPOINT 0 0 0 1 0 0 0\n").encode() + data
+
+
+@pytest.mark.parametrize("name, content, expect", [
+    ("points.pcd", _pcd("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 100000000\n"
+                        "HEIGHT 1\nPOINTS 100000000\nDATA binary\n", b"\0" * 24),
+     "100,000,000 points by its header, more than the 33,554,432"),
+    ("count.pcd", _pcd("FIELDS x y z d\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 5000\n"
+                       "WIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA binary\n", b"\0" * 16),
+     "PCD header COUNT sums to 5,003 values per point, more than the 4,096"),
+    ("shadow.pcd", SHADOW.encode(),
+     "not a PCD file: the header starts with a word that is no PCD keyword"),
+    ("vertices.ply", b"ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\n"
+                     b"property float y\nproperty float z\nend_header\n1 2 3\n",
+     "1,000,000,000,000 points by its header (element vertex), more than the 33,554,432"),
+    ("faces.ply", b"ply\nformat ascii 1.0\nelement face 1000000000000\nproperty float q\n"
+                  b"element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                  b"end_header\n1\n1 2 3\n4 5 6\n7 8 9\n",
+     "PLY ascii data has 4 lines; the header says 1000000000000 before the 3 vertex lines"),
+])
+def test_cloud_headers_claiming_too_much_are_refused(tmp_path, name, content, expect):
+    """Refused from the header, before anything of the claimed size is allocated (a count of
+    10**8 per point used to make 10**8 columns; 10**12 PLY lines made numpy reserve them)."""
+    from paretocal.io.readers import read_cloud
+
+    path = tmp_path / name
+    path.write_bytes(content)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ParetocalError) as info:
+            read_cloud(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert str(info.value).startswith(f"{path}: ") and expect in str(info.value)
+    assert "$6$" not in str(info.value) and peak < 20 * 2**20
+
+
+def test_a_bag_cloud_field_with_a_huge_count_is_refused(capfd, tmp_path, raw_frames):
+    """A PointCloud2 field of 10**9 values per point: numpy cannot even make its type (exit 1,
+    "unexpected error"); it lies beyond the point's bytes, which says what is wrong."""
+    pytest.importorskip("rosbags")
+    from .test_bags import PERIOD, T0, Msgs, records, write_bag
+
+    msgs, frames = Msgs(ros1=True), raw_frames[:2]
+    images = [msgs.image(T0 + k * PERIOD, f.image, "bgr8") for k, f in enumerate(frames)]
+    clouds = [msgs.cloud(T0 + k * PERIOD + 3_000_000, records(f)) for k, f in enumerate(frames)]
+    clouds[0].fields[3].count = 10**9                   # intensity, float32 at offset 12
+    bag = write_bag(tmp_path / "huge.bag", "ros1", {
+        "/img": images, "/pts": clouds, "/info": [msgs.info(T0, frames[0].camera)]})
+    bad(capfd, "extract", bag, "--out", tmp_path / "o", "--image-topic", "/img",
+        "--cloud-topic", "/pts",
+        expect=(f"{bag}: topic '/pts', cloud 0 (stamp ", "PointCloud2 field 'intensity' at "
+                "offset 12 (1000000000 x 4 bytes) lies beyond point_step 22"))
+    assert not (tmp_path / "o").exists()
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """The start of a PNG of ``width`` x ``height`` grey pixels: signature and IHDR (a decoder
+    reads the size from there; the pixel data need not follow)."""
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    chunk = struct.pack(">I", 13) + b"IHDR" + ihdr
+    return (b"\x89PNG\r\n\x1a\n" + chunk + struct.pack(">I", zlib.crc32(chunk[4:]))
+            + bytes(64))
+
+
+def _jpeg_header(width: int, height: int) -> bytes:
+    """The start of a JPEG of ``width`` x ``height``: SOI, an APP0 segment, a baseline frame
+    header (SOF0)."""
+    app0 = b"\xff\xe0\x00\x10JFIF\x00\x01\x01\x00\x00\x01\x00\x01\x00\x00"
+    sof = (b"\xff\xc0\x00\x0b\x08" + height.to_bytes(2, "big") + width.to_bytes(2, "big")
+           + b"\x01\x01\x11\x00")
+    return b"\xff\xd8" + app0 + sof + bytes(64)
+
+
+@pytest.mark.parametrize("suffix, head", [(".png", _png_header(20000, 20000)),
+                                          (".jpg", _jpeg_header(65000, 65000))])
+def test_an_image_header_claiming_too_many_pixels_is_refused_before_decoding(
+        capfd, tmp_path, rig, raw_frames, suffix, head):
+    """A 20000 x 20000 PNG (a 1 MB file) used to be decoded, 1.2 GB and 14 s, before its size
+    was compared with the camera's; its header says enough."""
+    (rig / "images" / f"{_stem(raw_frames)}.png").unlink()
+    path = rig / "images" / f"{_stem(raw_frames)}{suffix}"
+    path.write_bytes(head)
+    w, h = (20000, 20000) if suffix == ".png" else (65000, 65000)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(path), f"the image header says {w}x{h} pixels, more than the 268,435,456 "
+                           "an image may have"))
+
+
+def test_image_header_sizes_match_the_decoder():
+    """The header reader agrees with OpenCV on real PNG and JPEG files (baseline and
+    progressive, with an EXIF segment) and leaves other formats to the decoder."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    from paretocal.io.bags import compressed_image
+    from paretocal.io.readers import image_header_size
+
+    img = np.random.default_rng(1).integers(0, 255, (37, 53, 3), np.uint8)
+    files = [cv2.imencode(ext, img)[1].tobytes() for ext in (".png", ".jpg", ".bmp")]
+    progressive = BytesIO()
+    Image.fromarray(img).save(progressive, "JPEG", progressive=True, exif=b"Exif\0\0" + bytes(900))
+    files.append(progressive.getvalue())
+    sizes = [image_header_size(BytesIO(f)) for f in files]
+    assert sizes == [(53, 37), (53, 37), None, (53, 37)]
+    with pytest.raises(ParetocalError, match="bag: the image header says 20000x20000 pixels"):
+        compressed_image(SimpleNamespace(format="png", data=_png_header(20000, 20000)), "bag")
+
+
+def test_a_text_file_too_large_is_refused_before_parsing(capfd, tmp_path, rig):
+    """A 200 MB calib.yaml was still parsing after two minutes; beyond 8 MiB a text input is
+    refused from its size, before it is read."""
+    path = rig / "calib.yaml"
+    with open(path, "a") as fh:
+        fh.write(("# " + "x" * 1022 + "\n") * (9 << 10))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(str(path), " bytes, more than the 8 MiB a YAML, JSON, CSV or calibration text "
+                           "file may hold"))
+
+
+@pytest.mark.parametrize("where, text, expect", [
+    ("calib.yaml", "{calib}camera: {{K: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}}\n",
+     "'camera' is given twice in one mapping (lines "),
+    ("calib.yaml", "{calib}x: {{a: 1, a: 2}}\n",
+     "'a' is given twice in one mapping (line "),
+    ("--init", "T_cam_lidar: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n"
+               "T_cam_lidar: [[0,-1,0,0],[0,0,-1,0],[1,0,0,0],[0,0,0,1]]\n",
+     "'T_cam_lidar' is given twice in one mapping (lines 1 and 2)"),
+    ("--init.json", '{"T_cam_lidar": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]],'
+                    ' "T_cam_lidar": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}',
+     "'T_cam_lidar' is given twice in one mapping; a key may appear once"),
+    ("--config", "search:\n  pop: 16\n  gens: 3\n  pop: 400\n",
+     "'pop' is given twice in one mapping (lines 2 and 4)"),
+])
+def test_a_key_given_twice_is_refused(capfd, tmp_path, rig, where, text, expect):
+    """YAML (and JSON) keep the last of two equal keys silently: one of them is a mistake."""
+    if where == "calib.yaml":
+        path = rig / "calib.yaml"
+        path.write_text(text.format(calib=path.read_text()))
+        extra = []
+    else:
+        option, _, suffix = where.partition(".")
+        path = tmp_path / f"file.{suffix or 'yaml'}"
+        path.write_text(text)
+        extra = [option, path]
+    bad(capfd, "calibrate", rig, *extra, "--out", tmp_path / "o", *FAST,
+        expect=(str(path), expect))
+
+
+def test_a_manifest_key_given_twice_is_refused(tmp_path):
+    from paretocal.batch import read_manifest
+
+    path = tmp_path / "m.yaml"
+    path.write_text("- {id: a, source: x, source: y}\n")
+    with pytest.raises(ParetocalError, match="'source' is given twice in one mapping"):
+        read_manifest(path)
+
+
+def test_a_manifest_yaml_error_quotes_no_line(tmp_path):
+    """PyYAML's own message quotes the line it stopped at; the manifest's error used to carry
+    it, now only its line and column."""
+    from paretocal.batch import read_manifest
+
+    path = tmp_path / "m.yaml"
+    path.write_text("- {id: a, source: [" + "secret" * 100 + "\n")
+    with pytest.raises(ParetocalError) as info:
+        read_manifest(path)
+    assert str(info.value).startswith(f"{path}: not valid YAML (line 2, column 1: ")
+    assert "secret" not in str(info.value)
+
+
+def test_yaml_merge_keys_may_be_overridden():
+    from paretocal.io.readers import load_yaml
+
+    doc = load_yaml("base: &b {pop: 16, gens: 3}\nsearch:\n  <<: *b\n  gens: 5\n", "x")
+    assert doc["search"] == {"pop": 16, "gens": 5}
+
+
+def test_devices_and_fifos_are_named_and_never_opened(capfd, tmp_path, rig, raw_frames):
+    """A mask that is /dev/zero was said to be "not found"; a FIFO given as an input must not
+    be opened (reading it waits for a writer)."""
+    from paretocal import batch
+
+    _edit_calib(rig, lambda c: c["camera"].update(mask="/dev/zero"))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect=(f"{rig / 'calib.yaml'}: camera.mask file /dev/zero is a character device, "
+                "not a regular file"))
+    _edit_calib(rig, lambda c: c["camera"].pop("mask"))
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    try:
+        bad(capfd, "calibrate", rig, "--init", fifo, "--out", tmp_path / "o", *FAST,
+            expect=f"{fifo}: file expected, but this is a named pipe (FIFO)")
+        bad(capfd, "batch", fifo, "--out", tmp_path / "b",
+            expect=f"{fifo}: a manifest expected, but this is a named pipe (FIFO)")
+        # The batch fingerprint hashes an entry's init file: not a FIFO.
+        entry = batch.Entry(id="a", source=str(rig), init=str(fifo))
+        assert batch.entry_fingerprint(entry, Settings().to_dict())
+        stem = _stem(raw_frames)
+        for sub, name in (("points", f"{stem}.bin"), ("images", f"{stem}.png")):
+            kept = (rig / sub / name).read_bytes()
+            (rig / sub / name).unlink()
+            os.mkfifo(rig / sub / name)
+            bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+                expect=f"{rig / sub / name}: {'point cloud' if sub == 'points' else 'image'} "
+                       "file expected, but this is a named pipe (FIFO)")
+            (rig / sub / name).unlink()
+            (rig / sub / name).write_bytes(kept)
+        (rig / "calib.yaml").unlink()
+        os.mkfifo(rig / "calib.yaml")
+        bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+            expect=f"{rig / 'calib.yaml'}: file expected, but this is a named pipe (FIFO)")
+    finally:
+        # Should anything have opened a FIFO, let it go: open the write end and close it.
+        for path in (fifo, rig / "calib.yaml"):
+            if path.exists() and not path.is_file():
+                with contextlib.suppress(OSError):
+                    os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+
+
+def test_a_path_too_long_in_calib_yaml_is_named(capfd, tmp_path, rig):
+    """A mask name longer than the system allows used to escape as an OSError (exit 1) and
+    print the whole name; one holding a NUL character as a ValueError."""
+    _edit_calib(rig, lambda c: c["camera"].update(mask="m" * 5000))
+    line = bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+               expect="camera.mask file ")
+    assert line.endswith("cannot be reached (File name too long)") and len(line) < 1500
+    _edit_calib(rig, lambda c: c["camera"].update(mask="a\0b.png"))
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
+        expect="camera.mask file ")
+
+
+def test_a_read_only_file_system_is_not_called_no_permission(capfd, tmp_path, rig,
+                                                             monkeypatch):
+    """os.access says no for a folder on a read-only mount as for one without permission;
+    the file system's flags tell which (no read-only mount is available to the tests)."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access, real_statvfs = os.access, os.statvfs
+
+    def access(path, mode, *args, **kwargs):
+        return False if str(path).startswith(str(ro)) else real_access(path, mode, *args, **kwargs)
+
+    def statvfs(path):
+        if str(path).startswith(str(ro)):
+            return SimpleNamespace(f_flag=os.ST_RDONLY)
+        return real_statvfs(path)
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(os, "statvfs", statvfs)
+    bad(capfd, "calibrate", rig, "--out", ro / "run", *FAST,
+        expect=f"--out {ro / 'run'}: read-only file system")
+    bad(capfd, "perturb", rig, "--out", ro / "init.yaml",
+        expect=f"--out {ro / 'init.yaml'}: read-only file system")
+
+    out, real_replace = tmp_path / "o", os.replace
+
+    def replace(src, dst, *args, **kwargs):                 # the file system went read-only
+        if str(dst).startswith(str(out)):
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+        return real_replace(src, dst, *args, **kwargs)
+    monkeypatch.setattr(os, "access", real_access)
+    monkeypatch.setattr(os, "replace", replace)
+    bad(capfd, "calibrate", rig, "--out", out, *FAST, "-q",
+        expect=(str(out), "cannot write (Read-only file system)"))
+
+
+def _caught(pid: int) -> int:
+    """The signals process ``pid`` catches (a handler is installed), as a bit mask (bit
+    signum - 1), from /proc; 0 when it has gone."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            return next(int(ln.split()[1], 16) for ln in fh if ln.startswith("SigCgt:"))
+    except (OSError, StopIteration):
+        return 0
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("how", ["-m", "console"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])
+def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, delay):
+    """SIGINT or SIGTERM while the command line starts (it imports typer and click, some
+    0.1 s, before cli.main takes over): one line and exit 130 or 143, no traceback; from then
+    on SIGTERM is a Ctrl-C, as before (exit 130, "interrupted before the run started" or how
+    the run stopped; test_resume.py ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
+
+    The delays count from the moment the process catches SIGTERM, i.e. from the first lines
+    of paretocal/__main__.py (before them the interpreter starts, about 15 ms of site and
+    runpy that no code of the package can reach: a signal then kills the process, or Python
+    prints its own traceback). Without those lines the command line caught it only once
+    cli.main ran, and a signal before that ended the process with a traceback (SIGINT) or
+    silently (SIGTERM)."""
+    args = ["calibrate", str(raw_date), "--out", str(tmp_path / "run"), "--gens", "3000",
+            "--frames", "0:2", "--no-figures"]
+    start = (["-m", "paretocal"] if how == "-m"
+             else ["-c", "from paretocal.__main__ import console; console()"])
+    proc = subprocess.Popen([sys.executable, *start, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, preexec_fn=default_sigint)
+    term = 1 << (signal.SIGTERM - 1)
+    deadline = time.monotonic() + 60
+    while not _caught(proc.pid) & term and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.0005)
+    time.sleep(delay)
+    proc.send_signal(sig)
+    out, _ = proc.communicate(timeout=120)
+    lines = out.strip().splitlines()
+    assert "Traceback" not in out and len(lines) == 1, out
+    starting = {signal.SIGINT: (130, "paretocal: interrupted while starting; nothing was written"),
+                signal.SIGTERM: (143, "paretocal: terminated while starting; nothing was written")}
+    if delay > 0.02 and (proc.returncode, lines[0]) != starting[sig]:
+        # The command line took over (after importing typer and click, some 0.1 s): as today.
+        assert proc.returncode == 130 and lines[0].startswith("paretocal: interrupted"), out
+    else:
+        assert (proc.returncode, lines[0]) == starting[sig], out
+    assert not (tmp_path / "run" / "result.json").exists()

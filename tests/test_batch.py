@@ -70,7 +70,13 @@ def test_batch_records_failures_and_resumes(manifest, first_run):
         assert (out / "runs" / eid / "result.json").exists()
         # Published as a run folder: staged, with the list of what it wrote.
         assert not (out / "runs" / eid / ".staging").exists()
-        assert "result.json" in (out / "runs" / eid / ".outputs").read_text().split()
+        assert {"result.json", "run_args.json"} <= set(
+            (out / "runs" / eid / ".outputs").read_text().split())
+        # ... with the run's arguments, as calibrate --resume reads them.
+        from paretocal.rundir import run_arguments
+
+        args = run_arguments(out / "runs" / eid)
+        assert args["settings"].frames == row["frames"] and args["T_init"] is not None
         assert float(row["drift_rotation_deg"]) > 0.1          # the start was 1.5 deg off
         assert row["check_verdict"] in ("calibrated", "miscalibrated")
         assert float(row["ref_rotation_deg"]) >= 0

@@ -226,6 +226,13 @@ class TestCheck:
         # Two frames: the check says it is weak, in the JSON and on the last line.
         assert doc["weak"] and "only 2 frame(s)" in doc["notes"][0]
         assert stdout.strip().splitlines()[-1].startswith("paretocal: WEAK CHECK: only 2 frame")
+        # What was compared: the features per frame as in the report, and the rings.
+        mean = doc["features"]["per_frame_mean"]
+        line = stdout.splitlines()[1]
+        assert line.startswith(f"paretocal: features per frame: {mean['depth_edge']:g} depth "
+                               f"edges, {mean['intensity_edge']:g} intensity edges, "), line
+        assert "64 rings" in line and "2 of 2 frames contribute" in line
+        assert "noise" not in line
 
     def test_without_extrinsic_the_datasets_own_is_checked(self, tmp_path, raw_date, capsys):
         from paretocal.io import detect_source
@@ -242,6 +249,20 @@ class TestCheck:
     def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
         code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")
         assert code == 2 and "none.yaml: file not found" in err
+
+
+def test_the_features_line_names_frames_whose_depth_edges_look_like_noise():
+    from paretocal.cli import _features_line
+
+    features = {"per_frame_mean": {"depth_edge": 812.5, "intensity_edge": 90.0, "smooth": 1000.0},
+                "rings": [2, 64], "ring_recovery": {"methods": ["lines"], "min_purity": 0.0},
+                "frames_contributing": 2, "per_frame": [{}, {}],
+                "noise": [{"frame": "000028", "reason": "2 laser rings found (a spinning LiDAR "
+                                                        "has at least 8)"}]}
+    line = _features_line(features)
+    assert "2/64 rings (lines, purity >= 0.00)" in line
+    assert line.endswith("the depth edges of 1 frame(s) look like noise (frame 000028: 2 laser "
+                         "rings found (a spinning LiDAR has at least 8))")
 
 
 def test_verdict_line_names_the_main_reason_and_counts_the_rest():

@@ -171,3 +171,25 @@ def test_equalize_brings_a_night_image_to_a_day_images_edges(data, raw_frames):
     assert n_night < 0.15 * n_day
     assert e_night / e_day > 0.25
     assert e_night / n_night > 5.0 and e_day / n_day < 2.0
+
+
+def test_feature_counts_name_each_frame_and_the_noisy_ones(raw_frames):
+    """result.json and check say how many features of each group every frame gave, with its
+    rings, and which frames' depth edges are likely noise (rings that are not the lasers')."""
+    from dataclasses import replace
+
+    from paretocal.stage import Stage, feature_counts
+
+    frames = raw_frames[:2]
+    stage = Stage(frames, frames[0].T_ref, frames[0].T_ref, Settings())
+    good = feature_counts(stage.feats)
+    assert [p["frame"] for p in good["per_frame"]] == [f.name for f in frames]
+    for p, f in zip(good["per_frame"], stage.feats):
+        assert p["depth_edge"] == int((f.group == DEPTH_EDGE).sum()) > 0
+        assert p["rings"]["n_rings"] == 64 and p["rings"]["purity"] > 0.9
+    assert good["noise"] == []
+    mixed = [replace(stage.feats[0], rings=dict(stage.feats[0].rings, n_rings=3)),
+             replace(stage.feats[1], rings=dict(stage.feats[1].rings, purity=0.4))]
+    noise = feature_counts(mixed)["noise"]
+    assert [n["frame"] for n in noise] == [f.name for f in frames]
+    assert "3 laser rings" in noise[0]["reason"] and "40 %" in noise[1]["reason"]

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from paretocal.quality import TO_REPORT, neighbour_fraction, quality_report
+from paretocal.testing import kitti_truth
 
 
 class QuadraticFrames:
@@ -107,3 +108,21 @@ class TestCheckOnKitti:
         T = raw_frames[0].T_ref @ correction_matrix(perturbation)
         r = check_extrinsic(raw_frames, T)
         assert r["verdict"] == verdict, r["moved"]
+
+    def test_a_cloud_in_a_vehicle_frame_is_checked_like_the_sensor_frame(self, raw_frames):
+        """The check does the LiDAR steps of a calibration: the sensor located in a cloud
+        stored in a vehicle frame (no lidar_pose given), its rings found about it. About the
+        cloud's origin the "rings" would mix lasers and the edges be noise."""
+        from dataclasses import replace
+
+        from paretocal.check import check_extrinsic
+        from paretocal.geometry import invert
+        from paretocal.testing import to_vehicle_frame, vehicle_pose
+
+        P = vehicle_pose()
+        frames = [replace(f, points=to_vehicle_frame(kitti_truth(f.points), P).points,
+                          ring=None, sensor_pose=None) for f in raw_frames[::4]]
+        r = check_extrinsic(frames, raw_frames[0].T_ref @ invert(P))
+        assert r["verdict"] == "calibrated", r["moved"]
+        assert r["neighbour_fraction"] <= 0.05
+

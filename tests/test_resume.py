@@ -21,6 +21,8 @@ from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import correction_matrix
 from paretocal.search.checkpoint import Checkpoint, SearchInterrupted
 
+from .helpers import default_sigint
+
 SMALL = Settings().replace(search={"pop": 24, "gens": 12, "seed": 3},
                            decision={"refine": False})
 
@@ -84,7 +86,7 @@ def test_one_run_per_folder(tmp_path, raw_date, start):
     """A folder another process writes is refused, naming it; a run refused for its input
     leaves an interrupted run's folder resumable; a rerun publishes only its own files."""
     from paretocal import calibrate_run, resume_run
-    from paretocal.rundir import CHECKPOINT, PARTIAL_FRONT, RUN_ARGS, locked
+    from paretocal.rundir import CHECKPOINT, CHECKPOINT_ARGS, PARTIAL_FRONT, locked
 
     _, T = start
     s = dataclasses.replace(SMALL, frames="0:2")
@@ -96,10 +98,10 @@ def test_one_run_per_folder(tmp_path, raw_date, start):
     with pytest.raises(SearchInterrupted):
         calibrate_run(raw_date, run, T, s, figures=False, checkpoint_every=2,
                       progress=_stop_at(5))
-    args = (run / RUN_ARGS).read_text()
+    args = (run / CHECKPOINT_ARGS).read_text()
     with pytest.raises(InputError, match="another run"):
         calibrate_run(raw_date, run, T, dataclasses.replace(s, frames="0:3"), figures=False)
-    assert (run / RUN_ARGS).read_text() == args and (run / CHECKPOINT).exists()
+    assert (run / CHECKPOINT_ARGS).read_text() == args and (run / CHECKPOINT).exists()
     resume_run(run)
     assert not (run / PARTIAL_FRONT).exists() and (run / "result.json").exists()
     # A rerun with figures, then without: the figures of the first do not stay behind.
@@ -239,7 +241,8 @@ def test_an_interrupt_in_any_phase_says_where_and_what_to_do(
     assert len(err) == 1 and err[0].startswith(f"paretocal: interrupted while {words};"), err
     if searched:
         assert f"--resume {run}" in err[0] and "partial_front.csv" in err[0]
-        assert {"checkpoint.npz", "partial_front.csv", "run_args.json"} <= set(os.listdir(run))
+        assert {"checkpoint.npz", "partial_front.csv", "checkpoint_args.json"} <= set(
+            os.listdir(run))
         assert not (run / "result.json").exists() and not (run / ".staging").exists()
     else:
         assert f"nothing was written to {run}" in err[0]
@@ -317,7 +320,8 @@ def test_ctrl_c_at_any_time_prints_one_line_and_no_traceback(tmp_path, raw_date,
     run = tmp_path / "run"
     cmd = [sys.executable, "-m", "paretocal", "calibrate", str(raw_date), "--out", str(run),
            "--gens", "3000"] + CLI
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     time.sleep(0.02)

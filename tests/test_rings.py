@@ -150,3 +150,24 @@ def test_compiled_ring_line_sums_are_numpys(rng):
     ref = np.array([1.4826 * np.median(r[lab == k]) + 1e-7 if (lab == k).any() else np.nan
                     for k in range(n)])
     np.testing.assert_array_equal(sig, ref)
+
+
+def test_a_motion_compensated_sweep_is_judged_where_the_camera_looks(sweeps, raw_frames):
+    """A sweep moved into the frame of the camera's instant while the vehicle drove and
+    pitched lies on its lasers' cones only near the view: judged on the whole sweep its rings
+    are implausible, judged on the returns the features come from they are the sensor's."""
+    from dataclasses import replace
+
+    from paretocal.config import FeatureSettings
+    from paretocal.features.prepare import view_mask
+    from paretocal.testing import compensated
+
+    first = recover_rings(firing_order(sweeps[0]).points)
+    v = firing_order(compensated(sweeps[1], speed_mps=1.5, pitch_dps=2.0))
+    frame = replace(raw_frames[9], points=v.points, ring=None)
+    view = view_mask(frame, [(frame.camera, frame.T_ref)], FeatureSettings())
+    whole = recover_rings(v.points, model=first)
+    assert whole.n_rings < 8 or whole.purity < MIN_PURITY
+    r = recover_rings(v.points, model=first, view=view)
+    assert r.n_rings == 64 and r.purity >= MIN_PURITY and not r.notes
+    assert ring_accuracy(r.ring[view], v.ring[view]) >= 0.99

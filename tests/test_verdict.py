@@ -56,7 +56,7 @@ def test_no_restart_when_switched_off(stage):
     q = {"jackknife_se": dict.fromkeys(AXES, 0.1)}
     ev = gather_evidence(stage.objective, s, stage.n_min, stage.n_max, _full(stage, np.zeros(6)),
                          q)
-    assert "restart" not in ev and set(ev) == {"contrast", "intervals"}
+    assert "restart" not in ev and set(ev) == {"contrast", "start", "intervals"}
 
 
 def test_local_optima_polished_together_are_those_polished_alone(stage):
@@ -194,3 +194,38 @@ def test_alignment_is_the_median_distance_of_edge_points_to_image_edges(stage):
     off[3] += 5 * resolution(stage.objective, x)[3]            # yaw: 5 px
     far = alignment_px(stage.objective, off)
     assert 0.5 < near < 3.0 and far > near + 0.3, (near, far)
+
+
+def test_the_start_is_compared_with_an_untrusted_result(stage, raw_frames):
+    """Item for a user whose result is judged unreliable: do the frames prefer it to their
+    initial extrinsic? A wrong result 3 deg from a correct start: no, keep the start. A correct
+    result 3 deg from a wrong start: yes."""
+    from paretocal.geometry import correction_matrix, correction_params, invert
+    from paretocal.verdict import start_evidence, start_text
+
+    wrong = _full(stage, [0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
+    ev = start_evidence(stage.objective, wrong)             # the start is the reference
+    assert not ev["result_clearly_better"] and ev["mean_px"] > 0
+    assert ev["frames_start_better"] >= 5 and ev["separation_deg"] == pytest.approx(3.0, abs=1e-6)
+    assert "keep the initial extrinsic" in start_text(ev)
+
+    frames = raw_frames[:6]
+    T_start = frames[0].T_ref @ correction_matrix([0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
+    off = Stage(frames, frames[0].T_ref, T_start, SETTINGS)
+    truth = _full(off, correction_params(invert(T_start) @ frames[0].T_ref))
+    ev = start_evidence(off.objective, truth)
+    assert ev["result_clearly_better"] and ev["frames_start_better"] <= 1
+    assert "do prefer the result" in start_text(ev)
+
+
+def test_the_verdict_line_of_an_untrusted_result_says_how_the_start_compares():
+    from paretocal.verdict import verdict_text
+
+    start = {"separation_deg": 2.5, "separation_cm": 14.0, "mean_px": 0.2, "frames": 8,
+             "frames_start_better": 6, "p_start_better": 0.02, "result_clearly_better": False}
+    line = verdict_text({"verdict": "unreliable", "reasons": ["the frames disagree"],
+                         "start": start})
+    assert line.startswith("UNRELIABLE: the frames disagree; ") and "6 of 8 frames" in line
+    assert "keep the initial extrinsic" in line
+    ok = verdict_text({"verdict": "ok", "reasons": [], "frames": 8, "start": None})
+    assert "initial extrinsic" not in ok

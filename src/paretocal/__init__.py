@@ -20,12 +20,9 @@ transforms are 4x4 ``T_cam_lidar`` (LiDAR -> camera, metres); angles in files an
 degrees.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("paretocal")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0"
+# Nothing is imported here: the command line's start-up (python -m paretocal, the console
+# script) runs this module before paretocal.__main__ can install its signal handlers, so it must
+# take no time. __version__ too is looked up on first use (importlib.metadata takes 20 ms).
 
 #: Public names and the modules that define them, imported on first use (PEP 562) so that
 #: ``import paretocal.cli`` stays light: the command line answers --help and interrupts at once.
@@ -39,6 +36,15 @@ _LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "con
 
 
 def __getattr__(name: str):
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            value = version("paretocal")
+        except PackageNotFoundError:  # pragma: no cover - running from a source tree
+            value = "0.0.0"
+        globals()[name] = value
+        return value
     if name in _LAZY:
         import importlib
 
@@ -49,7 +55,7 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | {"__version__"})
 
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",

@@ -1,21 +1,43 @@
 """``python -m paretocal`` and the ``paretocal`` console script.
 
-Kept free of heavy imports, so that an interrupt while the command line loads (numpy, OpenCV,
-numba take about a second) still ends with one line instead of a traceback.
+The first thing this module does is take over SIGINT and SIGTERM: until the command line
+installs its own handlers (:func:`paretocal.cli.main`, once typer and click are imported, some
+0.1 s later), either signal ends the process at once with one line, exit status 130 (SIGINT)
+or 143 (SIGTERM): nothing has been written yet. Nothing heavy is imported before, and
+``paretocal/__init__.py``, which runs first, imports nothing.
 """
 
-import os
-import signal
-import sys
+try:
+    import _signal as signal    # what the signal module wraps, without its enums (3 ms of imports)
+except ImportError:             # pragma: no cover - another Python implementation
+    import signal
+
+#: Exit status and word of each signal while the command line starts (128 + the signal).
+_STARTING = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
+
+
+def _stop_while_starting(signum, frame):
+    """One line, and exit: nothing to save or remove yet, so no exception is raised (it would
+    unwind through the imports under way and print a traceback)."""
+    import os
+
+    status, words = _STARTING[signum]
+    os.write(2, f"paretocal: {words} while starting; nothing was written\n".encode())
+    os._exit(status)
+
+
+# A signal ignored when the process started (nohup, a background job) stays ignored.
+for _sig in _STARTING:
+    if signal.getsignal(_sig) is not signal.SIG_IGN:
+        signal.signal(_sig, _stop_while_starting)
+
+import os  # noqa: E402 - after the handlers, on purpose
+import sys  # noqa: E402
 
 
 def console() -> None:
-    try:
-        from .cli import main
-    except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)      # a second Ctrl-C: no traceback
-        sys.stderr.write("paretocal: interrupted while starting; nothing was written\n")
-        sys.exit(130)
+    from .cli import main
+
     # final: SIGINT and SIGTERM stay ignored after the command, so that a Ctrl-C while the
     # interpreter shuts down (joining threads) prints no traceback; the run has said how it ended.
     status = main(final=True)

@@ -34,11 +34,14 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .errors import InputError, ParetocalError
+from .errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
 from .io.atomic import atomic_path, atomic_write_text
 from .report.results import json_default
 
 RECORD = "entry.json"
+#: Names a batch folder holds (runs/ from the first task on): the CLI refuses to write a batch
+#: into a non-empty folder holding none of them unless told to (``--force``).
+BATCH_MARKS = ("runs", "summary.csv")
 log = logging.getLogger(__name__)
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
@@ -84,23 +87,27 @@ def read_manifest(path: str | Path) -> list[Entry]:
     ``source``, a duplicate or unsafe id (it names a folder), an unknown field, or a field of
     the wrong type.
     """
+    from .io.paths import kind_of, not_found
+
     path = Path(path)
-    if path.is_dir():
+    kind = kind_of(path)
+    if kind == "a folder":
         raise InputError(f"{path}: is a folder; expected a YAML or CSV manifest")
-    if not path.is_file():
-        raise InputError(f"{path}: manifest not found")
+    if kind != "a regular file":              # a FIFO is not opened: it would block
+        raise InputError(f"{path}: a manifest expected, but this is {kind}" if kind
+                         else not_found(path, "manifest"))
     text = _manifest_text(path)
     if path.suffix.lower() == ".csv":
         rows = _csv_rows(path, text)
     else:
         import yaml
 
-        from .io.readers import load_yaml
+        from .io.readers import load_yaml, yaml_error
 
         try:
-            doc = load_yaml(text, path)              # refuses alias bombs, naming the manifest
+            doc = load_yaml(text, path)      # refuses alias bombs and duplicate keys, naming it
         except yaml.YAMLError as exc:
-            raise InputError(f"{path}: not valid YAML ({' '.join(str(exc).split())})") from None
+            raise yaml_error(path, exc) from None
         rows = doc.get("entries") if isinstance(doc, dict) else doc
         if not isinstance(rows, list):
             raise InputError(f"{path}: expected a list of entries (or a mapping with 'entries')")
@@ -112,11 +119,11 @@ def read_manifest(path: str | Path) -> list[Entry]:
             raise InputError(f"{where}: expected a mapping of fields")
         odd = [key for key in row if not isinstance(key, str)]
         if odd:
-            raise InputError(f"{where}: field name {odd[0]!r} is not text")
+            raise InputError(f"{where}: field name {quote(odd[0])} is not text")
         row = {key: v for key, v in row.items() if v not in (None, "")}
         unknown = sorted(set(row) - known)
         if unknown:
-            raise InputError(f"{where}: unknown field(s) {', '.join(unknown)} "
+            raise InputError(f"{where}: unknown field(s) {key_list(unknown)} "
                              f"(known: {', '.join(sorted(known))})")
         for key in ("id", "source"):
             if key not in row:
@@ -124,16 +131,17 @@ def read_manifest(path: str | Path) -> list[Entry]:
         fields = {key: _field(where, key, v) for key, v in row.items()}
         eid = fields["id"]
         if not _ID.match(eid):
-            raise InputError(f"{where}: id {eid!r} must be letters, digits, '_', '-' or '.'")
+            raise InputError(f"{where}: id {quote(eid)} must be letters, digits, '_', '-' or '.'")
         if eid in seen:
-            raise InputError(f"{where}: duplicate id {eid!r}")
+            raise InputError(f"{where}: duplicate id {quote(eid)}")
         seen.add(eid)
         for key in ("source", "init"):
             if key in fields:
                 try:
                     fields[key] = str((path.parent / fields[key]).resolve())
                 except (OSError, RuntimeError) as exc:       # RuntimeError: a symlink loop
-                    raise InputError(f"{where}: {key} {fields[key]!r}: {exc}") from None
+                    raise InputError(f"{where}: {key} {quote(fields[key])}: "
+                                     f"{first_line(exc)}") from None
         entries.append(Entry(**fields))
     if not entries:
         raise InputError(f"{path}: the manifest lists no entries")
@@ -143,7 +151,13 @@ def read_manifest(path: str | Path) -> list[Entry]:
 def _manifest_text(path: Path) -> str:
     """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
     before a parser reports it as something else."""
+    from .io.readers import MAX_TEXT_BYTES
+
     try:
+        size = path.stat().st_size
+        if size > MAX_TEXT_BYTES:
+            raise InputError(f"{path}: {size:,} bytes, more than the {MAX_TEXT_BYTES >> 20} MiB "
+                             "a manifest may hold")
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"{path}: cannot read the manifest ({exc.strerror or exc})") from None
@@ -170,7 +184,7 @@ def _csv_rows(path: Path, text: str) -> list[dict]:
             rows.append({k.strip(): v.strip() if isinstance(v, str) else v
                          for k, v in row.items()})
     except csv.Error as exc:
-        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({exc})") from None
+        raise InputError(f"{path}: line {reader.line_num}: not valid CSV ({first_line(exc)})") from None
     return rows
 
 
@@ -185,11 +199,11 @@ def _field(where: str, key: str, value) -> str | int:
             return value
         if isinstance(value, str) and value.strip().isdigit():
             return int(value)
-        raise InputError(f"{where}: camera {value!r} is not an integer")
+        raise InputError(f"{where}: camera {quote(value)} is not an integer")
     if key in ("vehicle", "order"):
         if isinstance(value, (str, int, float)) and not isinstance(value, bool):
             return str(value)
-        raise InputError(f"{where}: {key} {value!r} must be text or a number")
+        raise InputError(f"{where}: {key} {quote(value)} must be text or a number")
     if isinstance(value, str):
         return value
     hint = ""
@@ -197,7 +211,7 @@ def _field(where: str, key: str, value) -> str | int:
         hint = ('; quote it (frames: "2:4"): YAML reads unquoted 2:4 as the number 124'
                 if key == "frames" else
                 f'; quote it ({key}: "0005"): YAML reads unquoted 0005 as the number 5')
-    raise InputError(f"{where}: {key} {value!r} must be text{hint}")
+    raise InputError(f"{where}: {key} {quote(value)} must be text{hint}")
 
 
 def read_record(run_dir: Path) -> dict | None:
@@ -216,14 +230,35 @@ def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
     whether it is checked and drawn. A record is done only for the same fingerprint."""
     from .search.checkpoint import fingerprint
 
+    from .io.readers import MAX_TEXT_BYTES
+
     init = None
     if entry.init:
+        path = Path(entry.init)
         try:
-            init = hashlib.sha256(Path(entry.init).read_bytes()).hexdigest()
+            # Only a regular file of a readable size: a FIFO would block, a device never end.
+            if path.is_file() and path.stat().st_size <= MAX_TEXT_BYTES:
+                init = hashlib.sha256(path.read_bytes()).hexdigest()
         except OSError:
             pass                     # the entry fails on it when it runs; nothing to compare
     return fingerprint(asdict(entry), init, settings,
                        {"check": bool(check), "figures": bool(figures)})
+
+
+def entry_settings(entry: Entry, settings, dataset_options: bool = True) -> dict:
+    """The settings ``entry`` runs with (:meth:`Settings.to_dict`): ``settings`` with what
+    its source's calib.yaml states where they leave the default
+    (:func:`~paretocal.config.dataset_settings`), as ``paretocal calibrate`` on the source
+    would. A calib.yaml that cannot be read adds nothing here: the entry fails on it when it
+    runs, with the reader's message in its record."""
+    from .config import dataset_settings
+    from .io import source_options
+
+    try:
+        options = source_options(entry.source) if dataset_options else {}
+    except (ParetocalError, OSError):
+        options = {}
+    return dataset_settings(settings, options, dataset_options).to_dict()
 
 
 def is_done(record: dict | None, fingerprint: str) -> bool:
@@ -233,7 +268,9 @@ def is_done(record: dict | None, fingerprint: str) -> bool:
 
 
 def _failed(entry: Entry, reason: str, t0: float) -> dict:
-    return {**asdict(entry), "status": "failed", "reason": reason,
+    """The record of a failed entry; its reason is one line of at most MESSAGE_CHARS (the
+    summary table's ``reason`` column)."""
+    return {**asdict(entry), "status": "failed", "reason": excerpt(reason, MESSAGE_CHARS),
             "wall_s": round(time.perf_counter() - t0, 3), "worker": os.getpid()}
 
 
@@ -254,7 +291,8 @@ class _EntryLog(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         if record.thread == self.thread:
             try:
-                self.records.append([record.levelname, record.getMessage()])
+                self.records.append([record.levelname,
+                                     excerpt(record.getMessage(), MESSAGE_CHARS)])
             except Exception:  # noqa: BLE001 - a bad format string must not fail the entry
                 self.handleError(record)
 
@@ -301,15 +339,21 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
         pairs logged while the entry ran).
     """
-    from .rundir import locked
+    from .io.paths import not_plain, odd_kind
+    from .rundir import check_run_folder, locked
 
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
     with _EntryLog(log_level) as messages:
         try:
+            # The batch makes its entries' folders: one that is a link leads elsewhere.
+            kind = odd_kind(run_dir, folder=True)
+            if kind:
+                raise not_plain(run_dir, kind, "an entry's run folder")
             # One writer per run folder: a task left running by an interrupted batch on a
             # remote cluster must not mix its files with the rerun's.
             with locked(run_dir):
+                check_run_folder(run_dir)          # refused before calibrating, not after
                 # The record describes the last attempt: drop the old one before starting,
                 # so a task killed half-way leaves no record that says "ok".
                 (run_dir / RECORD).unlink(missing_ok=True)
@@ -348,15 +392,17 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .geometry import pose_error
     from .io import load_frames, read_extrinsic
     from .pipeline import calibrate
-    from .rundir import publish_run
+    from .rundir import publish_run, run_record
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_extrinsic(entry.init) if entry.init else None
     result = calibrate(frames, T_init, settings)
-    # Staged and published with result.json last: the folder never mixes two runs.
-    publish_run(result, run_dir, result.sweeps or frames, figures=figures)
+    # Staged and published with result.json last: the folder never mixes two runs, and its
+    # run_args.json is always the run's own.
+    publish_run(result, run_dir, result.sweeps or frames, figures=figures,
+                args=run_record(entry.source, T_init, settings, figures))
     drift = pose_error(result.T_cam_lidar, result.T_init)
     ref = result.reference_error or {}
     record = {**asdict(entry), "status": "ok", "reason": "",
@@ -426,7 +472,7 @@ def require_fleet() -> None:
 
 def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
               scheduler: str | None = None, workers: int | None = None, check: bool = True,
-              figures: bool = False, progress=None) -> dict:
+              figures: bool = False, progress=None, dataset_options: bool = True) -> dict:
     """Calibrate every entry of ``manifest`` on a Dask cluster.
 
     An entry is skipped when its ``entry.json`` says ``ok`` with the fingerprint
@@ -440,6 +486,9 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     manifest : path
     out_dir : path
     settings : Settings, optional
+        For each entry, what its source's calib.yaml states (``init_error``) replaces the
+        defaults these leave (:func:`~paretocal.config.dataset_settings`); the entry's
+        fingerprint covers the settings it runs with.
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``); by default a local
         cluster of ``workers`` processes (one thread each) is started and stopped.
@@ -450,6 +499,9 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
         See :func:`run_entry`.
     progress : callable, optional
         ``progress(done, total)`` as entries finish.
+    dataset_options : bool
+        False: the settings are final for every entry (they state ``init_error`` even where
+        it is the default).
 
     Returns
     -------
@@ -471,10 +523,10 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     t0 = time.perf_counter()
     entries = read_manifest(manifest)
     settings = (settings or Settings()).validate()
-    settings_dict = settings.to_dict()
+    by_entry = {e.id: entry_settings(e, settings, dataset_options) for e in entries}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    prints = {e.id: entry_fingerprint(e, settings_dict, check, figures) for e in entries}
+    prints = {e.id: entry_fingerprint(e, by_entry[e.id], check, figures) for e in entries}
     done = {}
     for e in entries:
         rec = read_record(out / "runs" / e.id)
@@ -485,7 +537,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     run_s = 0.0
     if pending:                                # nothing to run: no cluster to start
         try:
-            run_s = _run_pending(pending, records, prints, settings_dict, out, scheduler,
+            run_s = _run_pending(pending, records, prints, by_entry, out, scheduler,
                                  workers, check, figures, progress)
         except KeyboardInterrupt:
             finished = [records[e.id] for e in entries if e.id in records]
@@ -507,11 +559,12 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
             "records": ordered, "files": files}
 
 
-def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dict: dict,
+def _run_pending(pending: list[Entry], records: dict, prints: dict, by_entry: dict,
                  out: Path, scheduler, workers, check: bool, figures: bool,
                  progress) -> float:
-    """Run the entries' tasks, adding their records to ``records`` as they finish; returns
-    the seconds from the cluster's start to its close."""
+    """Run the entries' tasks (``by_entry``: each entry's settings as a dict), adding their
+    records to ``records`` as they finish; returns the seconds from the cluster's start to
+    its close."""
     from distributed import as_completed
 
     log_level = logging.getLogger("paretocal").getEffectiveLevel()
@@ -520,7 +573,7 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, settings_dic
         client, cluster, threads = _connect(scheduler, workers, log_level)
     t_run = time.perf_counter()
     try:
-        futures = {client.submit(run_entry, e, settings_dict, str(out.resolve()), check,
+        futures = {client.submit(run_entry, e, by_entry[e.id], str(out.resolve()), check,
                                  threads, figures, prints[e.id], log_level,
                                  key=f"paretocal-{e.id}-{time.time_ns()}", pure=False): e
                    for e in pending}

@@ -41,7 +41,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         check itself has too little to go on (fewer frames than a calibration needs to be
         trusted), with what to do.
     """
-    from .stage import Stage
+    from .inputs import prepare_lidar
+    from .stage import Stage, feature_counts
 
     settings = (settings or Settings()).validate()
     T = np.asarray(T, dtype=np.float64)
@@ -49,7 +50,11 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         if progress is not None:
             progress(stage, done, total)
 
-    stage = Stage(frames, T, T, settings, lambda d, t: tick("features", d, t))
+    # The LiDAR steps of a calibration (the sensor located in its cloud, the rings, the
+    # sweeps de-skewed): without them a cloud stored in a vehicle frame gives noise for edges.
+    lidar = prepare_lidar(frames, settings, [(frames[0].camera, T)])
+    stage = Stage(lidar.frames, T, T, settings, lambda d, t: tick("features", d, t),
+                  rings=lidar.rings)
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max
@@ -86,4 +91,5 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "T_local_optimum": T_opt.tolist(),
         "quality": quality,
         "frames": [f.name for f in frames],
+        "features": feature_counts(stage.feats),
     }

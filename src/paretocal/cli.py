@@ -17,10 +17,13 @@ from typing import Annotated, Optional
 import click
 import typer
 
-from .errors import STOP, ParetocalError, SettingsError
+from .errors import MESSAGE_CHARS, STOP, ParetocalError, SettingsError, excerpt
 
 # Options shared by several commands, declared once.
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
+Force = Annotated[bool, typer.Option(
+    "--force", help="Write into --out even when it is a folder of other files (those of the "
+                    "same names are replaced).")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")]
 Frames = Annotated[Optional[str], typer.Option("--frames", help="Frames: '0:10', '0,3,7' or stems.")]
 ConfigFile = Annotated[Optional[Path], typer.Option("--config",
@@ -149,30 +152,6 @@ def _phases() -> dict:
     return PHASES
 
 
-def _dataset_options(settings, source, take_init_error: bool):
-    """Settings the dataset states about itself (calib.yaml ``init_error``), unless the command
-    line or the config file already set them; returns ``(settings, detected source)``, the
-    source to load the frames from (detected once: its warnings are said once)."""
-    from .io import detect_source
-
-    detected = detect_source(Path(source), settings.camera)
-    return _adopt_init_error(settings, detected.options, take_init_error), detected
-
-
-def _adopt_init_error(settings, options: dict, take: bool):
-    """The dataset's own ``init_error`` (calib.yaml) when ``take`` and no option or config
-    file changed the default."""
-    from .config import SearchSettings
-
-    s = settings.search
-    if (take and "init_error" in options
-            and (s.init_error_deg, s.init_error_m) == (SearchSettings.init_error_deg,
-                                                       SearchSettings.init_error_m)):
-        deg, m = options["init_error"]
-        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
-    return settings
-
-
 def read_init(path: Path, source, camera: int | None):
     """The extrinsic file ``path`` as ``T_cam_lidar``; a KITTI ``calib_velo_to_cam.txt`` is
     taken through the rectification of ``source`` (a folder, or a source already detected;
@@ -274,13 +253,13 @@ def calibrate(
     strict: Annotated[bool, typer.Option(
         "--strict", help="Exit with status 3 when the result is judged unreliable (the outputs "
                          "are written either way).")] = False,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
     from .config import load_settings
     from .io import load_frames
-    from .io.atomic import check_output_dir
 
     _setup_logging(verbose, quiet)
     if resume is not None:
@@ -291,7 +270,7 @@ def calibrate(
                  "--init-error": init_error, "--bound-t": bound_t, "--bound-r": bound_r,
                  "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
                  "--evaluator": evaluator, "--polish/--no-polish": polish,
-                 "--no-figures": None if figures else False}
+                 "--no-figures": None if figures else False, "--force": force or None}
         clash = [name for name, value in given.items() if value is not None]
         if clash:
             raise SettingsError(f"--resume {resume} continues the run with the data, start and "
@@ -317,23 +296,42 @@ def calibrate(
                   "refine": polish, "max_deviation_px": max_deviation})
     import dataclasses
 
-    from .io import is_rig
+    from .config import states_init_error
+    from .io import detect_source, is_rig
+
+    # The dataset's own init_error (calib.yaml) applies unless the user set it: the library
+    # decides (config.dataset_settings) with the rest of the settings.
+    adopt = err_deg is None and not states_init_error(config)
     if is_rig(source):
-        return _calibrate_rig(source, out, init, camera, frames, settings, err_deg is None,
-                              figures, quiet, checkpoint_every, strict)
+        return _calibrate_rig(source, out, init, camera, frames, settings, adopt,
+                              figures, quiet, checkpoint_every, strict, force)
     if camera is not None:
         camera = _camera_index(camera)
     if camera is not None or frames is not None:
         settings = dataclasses.replace(settings, camera=camera if camera is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
-    settings, detected = _dataset_options(settings, source, err_deg is None)
     settings.validate()
-    check_output_dir(out)
+    # Detected once: its warnings are said once.
+    detected = detect_source(Path(source), settings.camera)
+    _check_run_out(out, force)
     T_init = read_init(init, detected, settings.camera) if init is not None else None
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
-                     strict)
+                     strict, dataset_options=adopt)
+
+
+def _check_run_out(out: Path, force: bool, option: str = "--out") -> None:
+    """Fail before any work when ``out`` cannot take a calibration run: not a writable
+    folder, a non-empty folder that is no run folder (unless ``force``), or a run folder
+    holding what a run must not follow (:func:`paretocal.rundir.check_run_folder`)."""
+    from .io.atomic import check_output_dir, check_own_folder
+    from .rundir import MARKS, check_run_folder
+
+    check_output_dir(out, option)
+    if not force:
+        check_own_folder(out, MARKS, "run", option)
+    check_run_folder(out)
 
 
 def _camera_index(text: str) -> int:
@@ -346,15 +344,15 @@ def _camera_index(text: str) -> int:
 
 
 def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,
-                   take_init_error: bool, figures: bool, quiet: bool, checkpoint_every: int,
-                   strict: bool) -> None:
+                   dataset_options: bool, figures: bool, quiet: bool, checkpoint_every: int,
+                   strict: bool, force: bool) -> None:
     """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
     and ``out/rig.json`` (:mod:`paretocal.rig`)."""
     import dataclasses
 
     from .errors import Interrupted
     from .io import rig_cameras
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
     from .rig import RIG_JSON, calibrate_rig, pair_line
 
     cams = rig_cameras(source)
@@ -368,9 +366,12 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
                             "--camera NAME")
     if frames is not None:
         settings = dataclasses.replace(settings, frames=frames)
-    settings = _adopt_init_error(settings, cams[0][1].options, take_init_error)
     settings.validate()
     check_output_dir(out)
+    if not force:       # a rig's run folder holds rig.json and a run folder per camera
+        check_own_folder(out, (RIG_JSON, *names), "rig run")
+    for name in [camera] if camera is not None else names:
+        _check_run_out(out / name, force)
     T_inits = {camera: read_init(init, source, None)} if init is not None else None
     unreliable = []
 
@@ -387,7 +388,8 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         with _Progress(quiet) as progress:
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
-                                    checkpoint_every, progress, on_camera=said)
+                                    checkpoint_every, progress, on_camera=said,
+                                    dataset_options=dataset_options)
     except Interrupted as exc:
         _report(interrupted_line(exc, getattr(exc, "run_dir", out)))
         raise typer.Exit(130) from None
@@ -400,7 +402,8 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
 
 
 def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, quiet: bool,
-                     checkpoint_every: int, strict: bool = False, resume: bool = False) -> None:
+                     checkpoint_every: int, strict: bool = False, resume: bool = False,
+                     dataset_options: bool = True) -> None:
     """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
     where the partial front and the checkpoint are, and exit 130."""
     from .errors import Interrupted
@@ -413,7 +416,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
             else:
                 result = calibrate_run(source, out, T_init, settings, frames=loaded,
                                        figures=figures, checkpoint_every=checkpoint_every,
-                                       progress=progress)
+                                       progress=progress, dataset_options=dataset_options)
     except Interrupted as exc:
         _report(interrupted_line(exc, out))
         raise typer.Exit(130) from None
@@ -470,10 +473,11 @@ def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
     from .io.atomic import check_output_dir
-    from .rundir import run_arguments
+    from .rundir import check_run_folder, run_arguments
 
     args = run_arguments(run_dir)              # a one-line error before anything is loaded
     check_output_dir(run_dir, "--resume")
+    check_run_folder(run_dir)
     _run_calibration(None, args["source"], args["T_init"], args["settings"], run_dir,
                      args["figures"], quiet, max(checkpoint_every, 1), strict, resume=True)
 
@@ -579,8 +583,30 @@ def check(
                f"optimum is {m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / "
                f"{m['pixels']:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
                f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
+    typer.echo(f"paretocal: {_features_line(r['features'])}")
     for note in r["notes"]:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
+
+
+def _features_line(features: dict) -> str:
+    """What the objective compared, in one line: the feature points per frame by group, the
+    rings, and the frames whose depth edges look like noise (``stage.feature_counts``)."""
+    mean = features["per_frame_mean"]
+    rings = features["rings"]
+    ring_text = ("no rings" if not rings else
+                 f"{'/'.join(str(r) for r in rings)} rings")
+    rec = features.get("ring_recovery")
+    if rec:
+        ring_text += f" ({', '.join(rec['methods'])}, purity >= {rec['min_purity']:.2f})"
+    line = (f"features per frame: {mean['depth_edge']:g} depth edges, "
+            f"{mean['intensity_edge']:g} intensity edges, {mean['smooth']:g} smooth points "
+            f"in view; {ring_text}; {features['frames_contributing']} of "
+            f"{len(features['per_frame'])} frames contribute")
+    noise = features["noise"]
+    if noise:
+        line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
+                 f"{noise[0]['frame']}: {noise[0]['reason']})")
+    return line
 
 
 @app.command()
@@ -598,6 +624,7 @@ def study(
                                                         "frames: a smoke test.")] = False,
     camera: CameraOrConfig = None,
     config: ConfigFile = None,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
@@ -607,12 +634,14 @@ def study(
 
     from .config import load_settings
     from .io import load_frames
-    from .study import StudyPlan, run_study
+    from .study import STUDY_MARKS, StudyPlan, run_study
 
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     check_output_dir(out)
+    if not force:
+        check_own_folder(out, STUDY_MARKS, "study")
     plan = StudyPlan.quick() if quick else StudyPlan()
     plan = dataclasses.replace(plan, **{k: v for k, v in (("pop", pop), ("gens", gens))
                                         if v is not None})
@@ -770,6 +799,7 @@ def batch(
     gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
     seed: Seed = None,
     config: ConfigFile = None,
+    force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
@@ -781,21 +811,24 @@ def batch(
     when interrupted (Ctrl-C or SIGTERM), after writing the summary of what is done: rerun the
     same command to continue.
     """
-    from .batch import BatchInterrupted, run_batch
-    from .config import load_settings
+    from .batch import BATCH_MARKS, BatchInterrupted, run_batch
+    from .config import load_settings, states_init_error
 
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     if workers < 1:
         raise SettingsError("--workers must be at least 1")
     check_output_dir(out)
+    if not force:
+        check_own_folder(out, BATCH_MARKS, "batch")
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
     try:
         with _Progress(quiet) as progress:
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
-                          progress=lambda d, t: progress("entries", d, t))
+                          progress=lambda d, t: progress("entries", d, t),
+                          dataset_options=not states_init_error(config))
     except BatchInterrupted as exc:
         _report(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done "
                 f"(summary so far in {exc.summary}); rerun the same command to continue")
@@ -895,7 +928,8 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
         # typer turns KeyboardInterrupt into exit status 130 itself.
         return _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
     except ParetocalError as exc:
-        print(f"paretocal: error: {exc}", file=sys.stderr)
+        # One line, whatever the message holds (control characters escaped, length bounded).
+        print(f"paretocal: error: {excerpt(exc, MESSAGE_CHARS)}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, typer.Abort, click.exceptions.Abort):
         return _interrupted(name)
@@ -912,8 +946,9 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
             import traceback
 
             traceback.print_exc()
-        print(f"paretocal: unexpected error: {type(exc).__name__}: {exc} "
-              "(rerun with --verbose for the traceback)", file=sys.stderr)
+        print(f"paretocal: unexpected error: {type(exc).__name__}: "
+              f"{excerpt(exc, MESSAGE_CHARS)} (rerun with --verbose for the traceback)",
+              file=sys.stderr)
         return 1
     finally:
         sys.unraisablehook = unraisable

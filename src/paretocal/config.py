@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SettingsError
+from .errors import SettingsError, key_list, quote
 
 
 @dataclass(frozen=True)
@@ -174,7 +174,7 @@ class Settings:
                           for k, v in values.items()}
                 out = dataclasses.replace(out, **{name: dataclasses.replace(current, **values)})
             else:
-                raise SettingsError(f"unknown settings section {name!r}")
+                raise SettingsError(f"unknown settings section {quote(name)}")
         return out
 
     @property
@@ -200,7 +200,7 @@ class Settings:
         for (section, name), allowed in CHOICES.items():
             value = getattr(getattr(self, section), name)
             if value not in allowed:
-                raise SettingsError(f"{_option(name)} {value!r}: choose "
+                raise SettingsError(f"{_option(name)} {quote(value)}: choose "
                                     f"{', '.join(allowed[:-1])} or {allowed[-1]}")
         _check_search(self.search)
         _check_objective(self.objective)
@@ -360,7 +360,7 @@ def _check_keys(cls, values: dict, section: str) -> None:
     names = {f.name for f in fields(cls)}
     unknown = sorted(map(str, set(values) - names))
     if unknown:
-        raise SettingsError(f"unknown setting(s) {', '.join(unknown)} in section {section!r} "
+        raise SettingsError(f"unknown setting(s) {key_list(unknown)} in section {section!r} "
                             f"(known: {', '.join(sorted(names))})")
 
 
@@ -407,8 +407,56 @@ def _coerce(name: str, value: Any, annotation: str) -> Any:
                  "str": "a string"}
         want = words.get(kind) or f"a list of {len(inner)} whole numbers"
         raise SettingsError(f"{name}: expected {want}{' or null' if 'None' in kinds else ''}, "
-                            f"got {value!r}")
+                            f"got {quote(value)}")
     return value
+
+
+def dataset_settings(settings: Settings | None, options: dict,
+                     adopt: bool = True) -> Settings:
+    """The settings a dataset is calibrated with: ``settings`` with what the dataset states
+    about itself where the settings leave the default.
+
+    A dataset states its ``init_error`` (calib.yaml; ``options`` as
+    :func:`paretocal.io.source_options` returns them): how far off its initial extrinsics
+    may be, which sets the search box. It is taken when ``adopt`` and the settings'
+    ``init_error_deg`` and ``init_error_m`` are both the defaults: settings that changed
+    either keep theirs (the user's word wins over the dataset's).
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        None: the defaults.
+    options : dict
+        ``init_error`` as ``(deg, m)`` when the dataset states it.
+    adopt : bool
+        False: the settings are final. For settings that state ``init_error`` even at its
+        default values (``--init-error``, a config file that names it), and for settings
+        recorded after adoption (a resumed run).
+
+    Returns
+    -------
+    Settings
+    """
+    settings = settings or Settings()
+    s, default = settings.search, SearchSettings()
+    if (adopt and options.get("init_error") is not None
+            and (s.init_error_deg, s.init_error_m) == (default.init_error_deg,
+                                                       default.init_error_m)):
+        deg, m = options["init_error"]
+        settings = settings.replace(search={"init_error_deg": deg, "init_error_m": m})
+    return settings
+
+
+def states_init_error(path: str | Path | None) -> bool:
+    """Whether the config file ``path`` names ``search.init_error_deg`` or ``init_error_m``
+    (then the user set it, even to the default values: a dataset's own does not replace it,
+    see :func:`dataset_settings`)."""
+    from .io.readers import read_mapping
+
+    if path is None:
+        return False
+    search = read_mapping(Path(path)).get("search")
+    return isinstance(search, dict) and bool({"init_error_deg", "init_error_m"} & set(search))
 
 
 def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
@@ -435,7 +483,7 @@ def _drop_retired(data: dict, name: str) -> dict:
         sec = out.get(section)
         if isinstance(sec, dict) and key in sec:
             if sec[key] != value:
-                raise SettingsError(f"{name}: {section}.{key}: {sec[key]!r} is no longer "
+                raise SettingsError(f"{name}: {section}.{key}: {quote(sec[key])} is no longer "
                                     f"available ({why}); remove the key")
             out[section] = {k: v for k, v in sec.items() if k != key}
     return out
@@ -450,7 +498,7 @@ def settings_from_mapping(data: dict, name: str = "settings",
     top = {f.name for f in fields(Settings)}
     unknown = sorted(map(str, set(data) - top))
     if unknown:
-        raise SettingsError(f"{name}: unknown section(s) {', '.join(unknown)} "
+        raise SettingsError(f"{name}: unknown section(s) {key_list(unknown)} "
                             f"(known: {', '.join(sorted(top))})")
     types = _field_types(Settings)
     sections, scalars = {}, {}
@@ -458,7 +506,7 @@ def settings_from_mapping(data: dict, name: str = "settings",
         is_section = dataclasses.is_dataclass(getattr(settings, k))
         if is_section and not isinstance(v, dict):
             raise SettingsError(f"{name}: section {k!r} must be a mapping of settings "
-                                f"(key: value), got {v!r}")
+                                f"(key: value), got {quote(v)}")
         if not is_section and isinstance(v, dict):
             raise SettingsError(f"{name}: {k!r} is a single value, not a section")
         (sections if is_section else scalars)[k] = v

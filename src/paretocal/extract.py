@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 import yaml
 
-from .errors import InputError, SettingsError
+from .errors import InputError, SettingsError, key_list
 from .io.atomic import check_output_dir
 from .io.bags import (CAMERA_INFO, COMPRESSED_IMAGE, IMAGE, IMAGE_ENCODINGS, POINT_CLOUD2, Bag,
                       camera_from_info, cloud_array, compressed_image, image_array,
@@ -332,7 +332,7 @@ def _write(bag: Bag, staging: Path, topics: tuple[str, str, str], pairing, stems
         missing = [c for c in "xyz" if c not in {n.lower() for n in points.dtype.names}]
         if missing:
             raise InputError(f"{where}: no {', '.join(missing)} field (fields: "
-                             f"{', '.join(points.dtype.names)})")
+                             f"{key_list(points.dtype.names)})")
         path = staging / "points" / f"{by_cloud[k]}.npy"
         with open(path, "wb") as fh:
             np.save(fh, points, allow_pickle=False)

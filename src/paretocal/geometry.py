@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, first_line
 
 
 def rotation_zyx(yaw_deg, pitch_deg, roll_deg) -> np.ndarray:
@@ -173,7 +173,7 @@ def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
     try:
         T = np.array(T, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as exc:
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        text = first_line(exc)
         if "inhomogeneous" in text or "sequence" in text:
             text = "rows of different lengths"
         raise InputError(f"{name}: {key} is not a numeric matrix ({text})") from None

@@ -11,7 +11,7 @@ import numpy as np
 
 from .config import Settings
 from .errors import InputError
-from .features.prepare import frame_rings
+from .features.prepare import frame_rings, view_mask
 from .features.rings import MIN_PURITY, MIN_RINGS, Rings
 from .io.frame import Frame
 
@@ -179,7 +179,7 @@ def locate_lidar(frames: list[Frame],
 
 
 def sweep_rings(frames: list[Frame], settings: Settings,
-                first: Rings | None = None) -> list[Rings]:
+                first: Rings | None = None, views=None) -> list[Rings]:
     """The rings of every frame's sweep (see :func:`~paretocal.features.prepare.frame_rings`);
     :func:`warn_rings` tells the user about the implausible ones.
 
@@ -188,12 +188,17 @@ def sweep_rings(frames: list[Frame], settings: Settings,
     first (measured on the KITTI drive in firing and random order: 0.4 s a sweep instead of
     1.5-2.7 s, every point on its true ring as before); a sweep the model does not fit is
     searched afresh. ``first``: the first frame's rings when already known (from
-    :func:`locate_lidar`)."""
+    :func:`locate_lidar`). ``views``: pairs ``(Camera, T_cam_lidar)`` the features will be
+    taken at; each sweep's rings are then judged on the returns near those views
+    (:func:`~paretocal.features.prepare.view_mask`): a sweep motion-compensated into one
+    frame fits its lasers' cones only near the time it was compensated to, which is the time
+    of the camera's view."""
     seq = np.random.SeedSequence([settings.search.seed, 1])
     out, model = [], None
     for k, (f, child) in enumerate(zip(frames, seq.spawn(len(frames)))):
+        view = None if views is None else view_mask(f, views, settings.features)
         r = (first if k == 0 and first is not None else
-             frame_rings(f, settings.features, np.random.default_rng(child), model))
+             frame_rings(f, settings.features, np.random.default_rng(child), model, view))
         if r.method == "lines" and r.n_rings >= MIN_RINGS and r.purity >= MIN_PURITY:
             model = r
         out.append(r)
@@ -276,10 +281,11 @@ def lidar_settings_key(settings: Settings) -> dict:
             "seed": settings.search.seed}
 
 
-def prepare_lidar(frames: list[Frame], settings: Settings) -> LidarSteps:
+def prepare_lidar(frames: list[Frame], settings: Settings, views=None) -> LidarSteps:
     """Locate the LiDAR, recover the rings and compensate the motion of ``frames``' sweeps
-    (as :func:`paretocal.calibrate` does), to be reused for every camera of a rig."""
+    (as :func:`paretocal.calibrate` does), to be reused for every camera of a rig; ``views``
+    as for :func:`sweep_rings` (every camera's that will use the steps)."""
     frames, lidar_info, first_rings = locate_lidar(frames, settings)
-    rings = sweep_rings(frames, settings, first_rings)
+    rings = sweep_rings(frames, settings, first_rings, views)
     frames, motion_info = compensate_motion(frames, settings)
     return LidarSteps(frames, lidar_info, rings, motion_info, lidar_settings_key(settings))

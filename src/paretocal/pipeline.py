@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Settings, check_population_memory
+from .config import Settings, check_population_memory, dataset_settings
 from .decide import decide, reprojection_deviation
 from .errors import STOP, InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
 from .geometry import pose_error
 from .io.frame import Frame
-from .io.layouts import load_frames
+from .io.layouts import load_frames, source_options
 from .quality import at_every_point, pixel_fd_step, quality_report
 from .search import coarse_seeds, polish_front, run_nsga2
 from .search.basin import prefer_near
@@ -30,7 +30,7 @@ from .objective import get_evaluator
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
 from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
-                    holdout_score, n_range, prepare_features)
+                    holdout_score, log_features, n_range, prepare_features)
 from .verdict import (MIN_POINTS_PER_FRAME, RELIABLE_MIN_FRAMES, gather_evidence,  # noqa: F401
                       reliability, verdict_text)
 
@@ -40,7 +40,8 @@ log = logging.getLogger(__name__)
 def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None,
               settings: Settings | None = None, progress=None,
               checkpoint: Checkpoint | None = None,
-              lidar: LidarSteps | None = None) -> CalibrationResult:
+              lidar: LidarSteps | None = None,
+              dataset_options: bool = True) -> CalibrationResult:
     """Calibrate the camera-LiDAR extrinsic of a set of frames.
 
     Parameters
@@ -50,6 +51,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     T_init : ndarray, shape (4, 4), optional
         Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
     settings : Settings, optional
+        For a dataset folder, what its calib.yaml states (``init_error``) replaces the
+        defaults these leave (:func:`~paretocal.config.dataset_settings`), as on the command
+        line; frames already loaded are calibrated with the settings as given.
     progress : callable, optional
         ``progress(stage, done, total)`` for ``stage`` in ``features`` (frames), ``search``
         (generations), ``polish`` (its passes: the first, and the one after re-selecting
@@ -63,11 +67,17 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         The LiDAR-only steps (:func:`~paretocal.inputs.prepare_lidar`) already done on these
         frames' clouds, for another camera of the rig: ``source`` must then be frames over the
         same clouds; they are not done again.
+    dataset_options : bool
+        False: the settings are final, also for a dataset folder (they state ``init_error``
+        even where it is the default).
 
     Returns
     -------
     CalibrationResult
+        ``settings`` holds the settings used.
     """
+    if isinstance(source, (str, Path)) and dataset_options:
+        settings = dataset_settings(settings, source_options(source))
     settings = (settings or Settings()).validate()
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
@@ -88,7 +98,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         with _timed(timings, "rings", progress):
             # Rings from the sweeps as recorded (each return on its laser's cone about the
             # sensor); everything else from the sweeps de-skewed to the image time.
-            rings = sweep_rings(frames, settings, first_rings)
+            rings = sweep_rings(frames, settings, first_rings, [(frames[0].camera, T_init)])
         with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
     if progress is not None:
@@ -102,6 +112,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                       if stored else None)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
+        log_features(stage.feats)
         _check_budget(stage, settings.decision)
     res, seeds = _search(stage, frames, T_init, settings, checkpoint, progress, timings)
     try:

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import project
-from .config import Settings
+from .config import Settings, dataset_settings
 from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
 from .inputs import prepare_lidar
@@ -54,7 +54,8 @@ RIG_JSON = "rig.json"
 def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None = None,
                   T_inits: dict[str, np.ndarray] | None = None,
                   cameras: list[str] | None = None, figures: bool = True,
-                  checkpoint_every: int = 5, progress=None, on_camera=None) -> dict:
+                  checkpoint_every: int = 5, progress=None, on_camera=None,
+                  dataset_options: bool = True) -> dict:
     """Calibrate the cameras of the rig folder ``source`` into ``out/<name>/`` and write
     ``out/rig.json`` (when more than one camera was calibrated).
 
@@ -64,7 +65,8 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         A rig folder (:func:`paretocal.io.rig_cameras`).
     out : path
     settings : Settings, optional
-        The same settings for every camera.
+        The same settings for every camera; what calib.yaml states (``init_error``) replaces
+        the defaults these leave (:func:`~paretocal.config.dataset_settings`).
     T_inits : dict, optional
         Initial ``T_cam_lidar`` by camera name; calib.yaml's for the cameras not in it.
     cameras : list of str, optional
@@ -73,15 +75,19 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         As for :func:`paretocal.rundir.calibrate_run`.
     on_camera : callable, optional
         ``on_camera(name, result)`` after each camera's run (for a line on the console).
+    dataset_options : bool
+        False: the settings are final (they state ``init_error`` even where it is the
+        default).
 
     Returns
     -------
     dict
         What rig.json holds (also when it is not written: one camera).
     """
-    settings = (settings or Settings()).validate()
     source, out = Path(source), Path(out)
     found = rig_cameras(source)
+    # Once for every camera; each run then takes the settings as they are.
+    settings = dataset_settings(settings, found[0][1].options, dataset_options).validate()
     names = [n for n, _ in found]
     T_inits = dict(T_inits or {})
     unknown = sorted(set(cameras or ()) - set(names)) + sorted(set(T_inits) - set(names))
@@ -99,13 +105,13 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
         # an image of every selected frame).
         key = tuple((f.name, str(f.points_path)) for f in frames[name])
         if key not in steps:
-            steps[key] = prepare_lidar(frames[name], settings)
+            steps[key] = prepare_lidar(frames[name], settings, _views(frames, T_inits, key))
         try:
             results[name] = calibrate_run(source, out / name, T_inits.get(name), settings,
                                           frames=frames[name], figures=figures,
                                           checkpoint_every=checkpoint_every,
                                           progress=progress, rig_camera=name,
-                                          lidar=steps[key])
+                                          lidar=steps[key], dataset_options=False)
         except Interrupted as exc:
             exc.run_dir = out / name       # the run folder to resume
             raise
@@ -120,6 +126,17 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
     if len(results) > 1:
         atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
     return summary
+
+
+def _views(frames: dict, T_inits: dict, key: tuple) -> list:
+    """``(camera, initial extrinsic)`` of every camera whose frames are over the clouds
+    ``key``: the LiDAR steps done once for them judge the rings where any of them looks."""
+    views = []
+    for name, fr in frames.items():
+        T = T_inits.get(name, fr[0].T_ref)
+        if T is not None and tuple((f.name, str(f.points_path)) for f in fr) == key:
+            views.append((fr[0].camera, np.asarray(T, dtype=np.float64)))
+    return views
 
 
 def _err(T: np.ndarray, T_ref: np.ndarray) -> dict:

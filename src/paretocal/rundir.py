@@ -1,12 +1,13 @@
 """Run folders: a calibration written to a folder that can be resumed after an interrupt.
 
 ``calibrate_run`` saves the search to ``checkpoint.npz`` every few generations, with
-``run_args.json`` beside it (what a resume needs: the source, the initial extrinsic, every
+``checkpoint_args.json`` beside it (what a resume needs: the source, the initial extrinsic, every
 setting, whether figures are drawn), and on completion publishes the run's files
-(``report.results.write_run``) and removes the checkpoint. An interrupt (SIGINT, or SIGTERM
-turned into one by the caller) during the search writes ``partial_front.csv`` and raises
-:class:`~paretocal.search.checkpoint.SearchInterrupted`; ``resume_run`` rebuilds the run from the
-folder and continues from the checkpoint to the result the uninterrupted run gives.
+(``report.results.write_run``) with its arguments as ``run_args.json``, and removes the
+checkpoint. An interrupt (SIGINT, or SIGTERM turned into one by the caller) during the search
+writes ``partial_front.csv`` and raises :class:`~paretocal.search.checkpoint.SearchInterrupted`;
+``resume_run`` rebuilds the run from the folder and continues from the checkpoint to the result
+the uninterrupted run gives.
 
 A folder holds one run:
 
@@ -14,28 +15,40 @@ A folder holds one run:
   holding it; a second run into the folder is refused with that name;
 * nothing is written before the search starts: a run refused for its input (a bad scene, a
   checkpoint of another run) leaves the folder as it was, so an interrupted run in it can still
-  be resumed; ``run_args.json`` is written with the first checkpoint;
+  be resumed; ``checkpoint_args.json`` is written with the first checkpoint;
 * the outputs are written to ``.staging/`` first, then the previous run's outputs (listed in
-  ``.outputs``) are removed, the new ones moved in, and ``result.json`` moved last: a folder
-  with ``result.json`` holds exactly one complete run, one without it no complete run.
+  ``.outputs``) are removed, the new ones (``run_args.json`` among them) moved in, and
+  ``result.json`` moved last: a folder with ``result.json`` holds exactly one complete run, and
+  its ``run_args.json`` is that run's; one without it no complete run. Publishing also removes
+  the temporaries that a kill during an atomic write of the run's files left.
+
+Nothing read from the folder reaches outside it (:func:`check_run_folder`, before the run and
+again before publishing; nothing is touched when it refuses): the run's own files are never
+followed through a symbolic link (one, a folder or a special file in their place is refused),
+``.outputs`` may name only plain files of the folder itself, and a checkpoint's every field is
+checked against the run's settings (:meth:`~paretocal.search.checkpoint.Checkpoint.load`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import logging
 import os
 import shutil
+import stat
 from pathlib import Path
 
 import numpy as np
 
-from .config import Settings, settings_from_mapping
-from .errors import Interrupted, ParetocalError
-from .io import load_frames, rig_source
-from .io.atomic import atomic_write_text
+from .config import Settings, dataset_settings, settings_from_mapping
+from .errors import InputError, Interrupted, ParetocalError
+from .geometry import check_rigid
+from .io import load_frames, rig_source, source_options
+from .io.atomic import atomic_write_text, temporary_pattern
 from .io.frame import Frame
+from .io.paths import not_plain, odd_kind, open_plain
 from .pipeline import calibrate
 from .report.results import partial_front_csv, write_run
 from .result import CalibrationResult
@@ -43,7 +56,8 @@ from .search.checkpoint import Checkpoint
 
 log = logging.getLogger(__name__)
 
-RUN_ARGS = "run_args.json"
+RUN_ARGS = "run_args.json"   #: the published run's arguments, published with its outputs
+CHECKPOINT_ARGS = "checkpoint_args.json"   #: the arguments of the run the checkpoint is of
 CHECKPOINT = "checkpoint.npz"
 PARTIAL_FRONT = "partial_front.csv"
 LOCK = ".lock"
@@ -51,12 +65,96 @@ STAGING = ".staging"
 OUTPUTS = ".outputs"         #: the names the last published run wrote, one per line
 RESULT = "result.json"       #: published last: the completion marker
 
+#: Names only a paretocal run folder holds: a folder with one of them is a run folder (an
+#: interrupted or killed run leaves at least ``.lock``); the CLI refuses to write a run into a
+#: folder that is not empty and holds none of them unless told to (``--force``).
+MARKS = (OUTPUTS, RESULT, RUN_ARGS, CHECKPOINT_ARGS, CHECKPOINT, PARTIAL_FRONT, LOCK, STAGING)
+#: The folder's bookkeeping: never an output, so never removed as the previous run's.
+_OWN = (LOCK, STAGING, OUTPUTS, CHECKPOINT, CHECKPOINT_ARGS)
+#: Bytes: the run's own text files hold a few kB; a larger one is not one a run wrote.
+_TEXT_LIMIT = 1 << 20
+_FILE = "a file of a paretocal run"
+
+
+def check_run_folder(out: Path) -> list[str]:
+    """Check what a run reads from its folder ``out``; return the names ``.outputs`` lists
+    (the files the last published run wrote, which the next one removes).
+
+    Raises :class:`InputError` naming the file, before anything is touched, when one of the
+    run's own files (:data:`MARKS`) is a symbolic link, a folder or a special file
+    (``.staging``: anything but a folder), or when a line of ``.outputs`` is not a plain file
+    name (a path separator, ``..``, a control character), names the folder's bookkeeping, or
+    names something that is not a plain file.
+    """
+    out = Path(out)
+    for name in MARKS:
+        kind = odd_kind(out / name, folder=name == STAGING)
+        if kind:
+            raise not_plain(out / name, kind, "the staging folder of a paretocal run"
+                            if name == STAGING else _FILE)
+    path = out / OUTPUTS
+    try:
+        text = _read_own(path)
+    except FileNotFoundError:
+        return []
+    names = []
+    for k, name in enumerate(text.split("\n"), 1):
+        if not name:
+            continue
+        why = None
+        if (name in (".", "..") or "/" in name or "\\" in name
+                or any(ord(c) < 32 or ord(c) == 127 for c in name)):
+            why = "is not a plain file name"
+        elif name in _OWN:
+            why = "is the run folder's own bookkeeping, not an output"
+        elif odd_kind(out / name):
+            why = f"is {odd_kind(out / name)}, not a file"
+        if why:
+            raise InputError(f"{path}: line {k}: {name!r} {why}; this file lists the files "
+                             "the folder's last run wrote (correct or remove the line)")
+        names.append(name)
+    return names
+
+
+def _read_own(path: Path) -> str:
+    """The text of one of the run's own small files, read without following a link. Raises
+    FileNotFoundError when it is absent, :class:`InputError` when it cannot be one a run
+    wrote."""
+    with open_plain(path, _FILE) as fh:
+        data = fh.read(_TEXT_LIMIT + 1)
+    if len(data) > _TEXT_LIMIT:
+        raise InputError(f"{path}: more than {_TEXT_LIMIT} bytes; not a file a paretocal run "
+                         "wrote")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {data[exc.start]:#04x} at offset "
+                         f"{exc.start}); not a file a paretocal run wrote") from None
+
+
+def _open_lock(lock: Path) -> int:
+    """The descriptor of the lock file ``lock``, created when absent; never through a link,
+    never a folder or a special file (refused naming it)."""
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(lock, flags, 0o644)
+    except OSError as exc:
+        if exc.errno not in (errno.ELOOP, errno.EISDIR, errno.ENXIO):
+            raise
+        raise not_plain(lock, odd_kind(lock) or "a special file",
+                        "the lock file of a paretocal run") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise not_plain(lock, odd_kind(lock) or "a special file",
+                        "the lock file of a paretocal run")
+    return fd
+
 
 @contextlib.contextmanager
 def locked(out: Path):
     """Hold ``out/.lock`` for the duration (``out`` is created if needed and removed again
     when it was created here and is left empty). Raises :class:`ParetocalError` naming the
-    process that holds the lock."""
+    process that holds the lock, or the ``.lock`` that is not a plain file."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX: no lock
@@ -64,7 +162,7 @@ def locked(out: Path):
         return
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = _open_lock(out / LOCK)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -88,29 +186,56 @@ def locked(out: Path):
 
 
 def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
-                figures: bool = True) -> list[Path]:
+                figures: bool = True, args: dict | None = None) -> list[Path]:
     """Write the run's files into ``out`` so that it never holds parts of two runs (module
-    docstring); returns the published paths."""
+    docstring); ``args``, the run's arguments (:func:`run_record`), are published as
+    ``run_args.json`` (without them a previous run's is removed). Returns the published
+    paths.
+
+    Raises :class:`InputError` (:func:`check_run_folder`, or a link, folder or special file
+    where a new output goes) before anything in ``out`` is removed.
+    """
+    out = Path(out)
+    previous = check_run_folder(out)
     staging = out / STAGING
-    shutil.rmtree(staging, ignore_errors=True)
+    shutil.rmtree(staging, ignore_errors=True)         # a real folder: checked above
     try:
+        os.mkdir(staging)
         written = write_run(result, staging, frames, figures=figures)
+        if args is not None:
+            atomic_write_text(staging / RUN_ARGS, json.dumps(args, indent=1) + "\n")
+            written.append(staging / RUN_ARGS)
+        names = [p.relative_to(staging).as_posix() for p in written]
+        for name in names:                             # os.replace cannot put a file there
+            kind = odd_kind(out / name)
+            if kind:
+                raise not_plain(out / name, kind, _FILE)
     except BaseException:
         # A failed or interrupted write (a full disk, Ctrl-C) leaves no half run behind.
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    names = [p.relative_to(staging).as_posix() for p in written]
     # The marker goes first, then everything the previous run published or left behind.
     (out / RESULT).unlink(missing_ok=True)
-    previous = out / OUTPUTS
-    old = previous.read_text(encoding="utf-8").split() if previous.is_file() else []
-    for name in set(old) | {PARTIAL_FRONT}:      # write_run writes files only
+    for name in set(previous) | {PARTIAL_FRONT, RUN_ARGS}:     # write_run writes files only
         (out / name).unlink(missing_ok=True)
-    atomic_write_text(previous, "\n".join(names) + "\n")
+    atomic_write_text(out / OUTPUTS, "\n".join(names) + "\n")
     for name in sorted(names, key=lambda n: n == RESULT):
         os.replace(staging / name, out / name)
     shutil.rmtree(staging, ignore_errors=True)
+    _remove_temporaries(out, set(names) | set(MARKS))
     return [out / n for n in names]
+
+
+def _remove_temporaries(out: Path, names) -> None:
+    """Remove the temporaries that a kill during an atomic write of one of ``names`` left in
+    ``out`` (exactly :func:`~paretocal.io.atomic.temporary_pattern`'s names, plain files)."""
+    patterns = [temporary_pattern(out / n) for n in names]
+    with os.scandir(out) as entries:
+        for entry in entries:
+            if (entry.is_file(follow_symlinks=False)
+                    and any(p.fullmatch(entry.name) for p in patterns)):
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(entry.path)
 
 
 class _RunCheckpoint(Checkpoint):
@@ -122,17 +247,18 @@ class _RunCheckpoint(Checkpoint):
 
     def save(self, state, history: list) -> None:
         if self.args is not None:
-            atomic_write_text(Path(self.path).parent / RUN_ARGS,
+            atomic_write_text(Path(self.path).parent / CHECKPOINT_ARGS,
                               json.dumps(self.args, indent=1) + "\n")
             self.args = None
         super().save(state, history)
 
 
-def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
-                  settings: Settings | None = None, frames: list[Frame] | None = None,
-                  figures: bool = True, checkpoint_every: int = 5,
-                  progress=None, rig_camera: str | None = None,
-                  lidar=None) -> CalibrationResult:
+def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
+        source: str | Path, out: str | Path, T_init: np.ndarray | None = None,
+        settings: Settings | None = None, frames: list[Frame] | None = None,
+        figures: bool = True, checkpoint_every: int = 5, progress=None,
+        rig_camera: str | None = None, lidar=None, *,
+        dataset_options: bool = True) -> CalibrationResult:
     """Calibrate ``source`` into the run folder ``out``, resumable.
 
     Parameters
@@ -143,6 +269,9 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
         The run folder.
     T_init : ndarray, shape (4, 4), optional
     settings : Settings, optional
+        What ``source``'s calib.yaml states (``init_error``) replaces the defaults these leave
+        (:func:`~paretocal.config.dataset_settings`); the settings used are recorded for the
+        resume.
     frames : list of Frame, optional
         The frames already loaded from ``source`` (loaded here when omitted).
     figures : bool
@@ -156,6 +285,9 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
     lidar : LidarSteps, optional
         The LiDAR-only steps already done on ``frames``' clouds (see
         :func:`paretocal.calibrate`).
+    dataset_options : bool
+        False: the settings are final (they state ``init_error`` even where it is the
+        default, or were recorded after adoption: a resumed run).
 
     Raises
     ------
@@ -165,7 +297,7 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
         ``checkpoint`` is set when the run can be resumed (``SearchInterrupted`` during the
         search itself).
     """
-    settings = settings or Settings()
+    settings = dataset_settings(settings, source_options(source) if dataset_options else {})
     out = Path(out)
     if frames is None:
         try:
@@ -173,21 +305,19 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
             frames = load_frames(src, settings.frames, settings.camera)
         except KeyboardInterrupt:
             raise Interrupted("loading the frames") from None
+    args = run_record(source, T_init, settings, figures, rig_camera)
     with locked(out):
+        check_run_folder(out)              # refused before the search, not after it
         ckpt = None
         if checkpoint_every > 0:
-            ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, {
-                "source": str(Path(source).resolve()),
-                "T_init": None if T_init is None else np.asarray(T_init).tolist(),
-                "settings": settings.to_dict(), "figures": bool(figures),
-                **({} if rig_camera is None else {"rig_camera": rig_camera})})
+            ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, args)
         try:
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
                                lidar=lidar)
             try:
                 if progress is not None:
                     progress("writing", 0, 1)
-                publish_run(result, out, result.sweeps or frames, figures=figures)
+                publish_run(result, out, result.sweeps or frames, figures=figures, args=args)
             except KeyboardInterrupt:
                 raise Interrupted("writing the results", result.history[-1]["gen"],
                                   result.nsga_front[0], result.nsga_front[1]) from None
@@ -195,49 +325,86 @@ def calibrate_run(source: str | Path, out: str | Path, T_init: np.ndarray | None
             if exc.X is not None:
                 atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
             # Resumable when the search state and the run's arguments are on disk (an
-            # interrupt before the first checkpoint leaves the folder as it was).
+            # interrupt before the first checkpoint leaves the folder as it was; a folder of
+            # the previous release keeps them in run_args.json).
             on_disk = (ckpt is not None and Path(ckpt.path).is_file()
-                       and (out / RUN_ARGS).is_file())
+                       and ((out / CHECKPOINT_ARGS).is_file() or (out / RUN_ARGS).is_file()))
             exc.checkpoint = Path(ckpt.path) if on_disk else None
             raise
-        if ckpt is not None:
-            # A finished run needs no checkpoint; its arguments stay as a record.
-            Path(ckpt.path).unlink(missing_ok=True)
+        # A finished run needs no checkpoint (nor one an earlier run left); run_args.json
+        # records its arguments.
+        (out / CHECKPOINT).unlink(missing_ok=True)
+        (out / CHECKPOINT_ARGS).unlink(missing_ok=True)
     return result
 
 
+def run_record(source: str | Path, T_init: np.ndarray | None, settings: Settings,
+               figures: bool, rig_camera: str | None = None) -> dict:
+    """A run's arguments as ``run_args.json`` holds them (what :func:`run_arguments` reads
+    back): the source's absolute path, ``T_init`` (4, 4) or None, the settings by section,
+    whether figures are drawn and the rig camera, if any."""
+    return {"source": str(Path(source).resolve()),
+            "T_init": None if T_init is None else np.asarray(T_init).tolist(),
+            "settings": settings.to_dict(), "figures": bool(figures),
+            **({} if rig_camera is None else {"rig_camera": rig_camera})}
+
+
 def run_arguments(run_dir: str | Path) -> dict:
-    """What ``run_dir/run_args.json`` recorded: ``source`` (Path), ``T_init`` (ndarray or
-    None), ``settings`` (Settings), ``figures`` (bool) and ``rig_camera`` (the camera of a rig
-    folder, or None). One-line error when it is not a run
-    folder or the file is damaged."""
-    path = Path(run_dir) / RUN_ARGS
-    if not path.is_file():
-        cameras = (sorted(p.parent.name for p in Path(run_dir).glob(f"*/{RUN_ARGS}")
-                          if _rig_camera_of(p) is not None)
-                   if Path(run_dir).is_dir() else [])
+    """What the run in ``run_dir`` recorded (``checkpoint_args.json`` of an unfinished run,
+    else ``run_args.json``): ``source`` (Path), ``T_init`` (ndarray or None), ``settings``
+    (Settings), ``figures`` (bool) and ``rig_camera`` (the camera of a rig folder, or None).
+    One-line error naming the file when it is not a run folder or a field is malformed."""
+    run_dir = Path(run_dir)
+    path = next((run_dir / n for n in (CHECKPOINT_ARGS, RUN_ARGS)
+                 if os.path.lexists(run_dir / n)), None)
+    if path is None:
+        cameras = (sorted({p.parent.name for n in (RUN_ARGS, CHECKPOINT_ARGS)
+                           for p in run_dir.glob(f"*/{n}") if _rig_camera_of(p) is not None})
+                   if run_dir.is_dir() else [])
         if cameras:
             raise ParetocalError(f"{run_dir}: the run folder of a rig (cameras "
                                  f"{', '.join(cameras)}); resume one camera with --resume "
-                                 f"{Path(run_dir) / cameras[0]}")
+                                 f"{run_dir / cameras[0]}")
         raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
-                             "calibrate (or it was run with --checkpoint-every 0)")
+                             "calibrate (or its run stopped before the first checkpoint, or "
+                             "ran with --checkpoint-every 0)")
     try:
-        args = json.loads(path.read_text())
+        args = json.loads(_read_own(path))
+    except ValueError as exc:
+        raise InputError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
+    if not isinstance(args, dict):
+        raise InputError(f"{path}: malformed: not a mapping of the run's arguments")
+
+    def malformed(field: str, want: str) -> InputError:
+        got = f"got {args[field]!r}"[:60] if field in args else "missing"
+        return InputError(f"{path}: malformed: {field} must be {want} ({got})")
+
+    source = args.get("source")
+    if not isinstance(source, str) or not source or "\0" in source:
+        raise malformed("source", "the dataset folder's path (text)")
+    T_init = (None if args.get("T_init") is None
+              else check_rigid(args["T_init"], str(path), key="T_init", orthonormalise=False))
+    if not isinstance(args.get("settings"), dict):
+        raise malformed("settings", "a mapping of settings by section")
+    if not isinstance(args.get("figures"), bool):
+        raise malformed("figures", "true or false")
+    camera = args.get("rig_camera")
+    if camera is not None and not isinstance(camera, str):
+        raise malformed("rig_camera", "a camera's name (text)")
+    try:
         settings = settings_from_mapping(args["settings"], str(path))
-        T_init = None if args["T_init"] is None else np.asarray(args["T_init"], dtype=float)
-        return {"source": Path(args["source"]), "T_init": T_init, "settings": settings,
-                "figures": bool(args["figures"]), "rig_camera": args.get("rig_camera")}
     except (ValueError, KeyError, TypeError) as exc:
-        raise ParetocalError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
+        raise InputError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
+    return {"source": Path(source), "T_init": T_init, "settings": settings,
+            "figures": args["figures"], "rig_camera": camera}
 
 
 def _rig_camera_of(run_args: Path) -> str | None:
-    """The rig camera a ``run_args.json`` records, or None (a single-camera run, or a file
+    """The rig camera a run's arguments record, or None (a single-camera run, or a file
     that cannot be read: the caller then reports the folder as it is)."""
     try:
-        found = json.loads(run_args.read_text()).get("rig_camera")
-    except (OSError, ValueError, AttributeError):
+        found = json.loads(_read_own(run_args)).get("rig_camera")
+    except (OSError, ValueError, AttributeError, ParetocalError):
         return None
     return found if isinstance(found, str) else None
 
@@ -247,8 +414,10 @@ def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
     """Continue the run in ``run_dir`` from its checkpoint (from the start when there is
     none), with the arguments it recorded; the same result as the uninterrupted run."""
     args = run_arguments(run_dir)
-    if not (Path(run_dir) / CHECKPOINT).exists():
+    if not os.path.lexists(Path(run_dir) / CHECKPOINT):
         log.warning("%s: no checkpoint; the run starts over", run_dir)
+    # The recorded settings are those the run used, the dataset's init_error already in them.
     return calibrate_run(args["source"], run_dir, args["T_init"], args["settings"],
                          figures=args["figures"], checkpoint_every=max(checkpoint_every, 1),
-                         progress=progress, rig_camera=args["rig_camera"])
+                         progress=progress, rig_camera=args["rig_camera"],
+                         dataset_options=False)

@@ -292,6 +292,10 @@ def holdout_score(scene, T_init: np.ndarray, objective: ObjectiveSettings,
 
 
 def feature_counts(feats: list[FrameFeatures]) -> dict:
+    """What the objective compares, for result.json and ``check``: the feature points per group
+    (mean per frame, total, and ``per_frame`` with each frame's rings), the frames that
+    contribute, and ``noise``: the frames whose depth edges are likely noise, each with why
+    (their rings do not fit a spinning LiDAR, so "neighbours along a ring" mix lasers)."""
     per = [f.counts() for f in feats]
     total = {g: int(sum(p[g] for p in per)) for g in GROUP_NAMES}
     summaries = [f.rings for f in feats if f.rings]
@@ -305,4 +309,44 @@ def feature_counts(feats: list[FrameFeatures]) -> dict:
             "ring_recovery": ring_info,
             # Frames with enough feature points in view to constrain anything.
             "frames_contributing": int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME
-                                           for f in feats))}
+                                           for f in feats)),
+            "per_frame": [{"frame": f.name, **c, "rings": _ring_brief(f.rings)}
+                          for f, c in zip(feats, per)],
+            "noise": [{"frame": f.name, "reason": why} for f in feats
+                      if (why := depth_edges_doubtful(f.rings))]}
+
+
+def log_features(feats: list[FrameFeatures]) -> None:
+    """The run's log: each frame's feature points per group and its rings (INFO), and one
+    warning naming the frames whose depth edges are likely noise (:func:`depth_edges_doubtful`)."""
+    for f in feats:
+        c, r = f.counts(), f.rings or {}
+        log.info("frame %s: %d depth edges, %d intensity edges, %d smooth points in view; %s "
+                 "rings (%s, purity %.3f)", f.name, c["depth_edge"], c["intensity_edge"],
+                 c["smooth"], r.get("n_rings", "?"), r.get("method", "?"), r.get("purity", 0.0))
+    doubtful = [(f.name, why) for f in feats if (why := depth_edges_doubtful(f.rings))]
+    if doubtful:
+        log.warning("the depth edges of %d of %d frames are likely noise (frame %s: %s); the "
+                    "calibration leans on them: give the clouds' ring field or lidar_pose in "
+                    "calib.yaml", len(doubtful), len(feats), doubtful[0][0], doubtful[0][1])
+
+
+def _ring_brief(rings: dict | None) -> dict | None:
+    return None if not rings else {k: rings[k] for k in ("method", "n_rings", "purity")}
+
+
+def depth_edges_doubtful(rings: dict | None) -> str | None:
+    """Why a frame's depth edges are likely noise, or None: they are the near sides of range
+    jumps between neighbours on a ring, so rings that are not the lasers' (too few, or points
+    off their ring's cone: purity below MIN_PURITY) make neighbours of returns that are not."""
+    from .features.rings import MIN_PURITY, MIN_RINGS
+
+    if not rings:
+        return None
+    if rings["n_rings"] < MIN_RINGS:
+        return (f"{rings['n_rings']} laser rings found (a spinning LiDAR has at least "
+                f"{MIN_RINGS})")
+    if rings["purity"] < MIN_PURITY:
+        return (f"only {100 * rings['purity']:.0f} % of the returns near the view lie on their "
+                "ring's cone")
+    return None

@@ -211,6 +211,57 @@ def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, pose
                             for i, g in enumerate(GROUP_NAMES)}}
 
 
+def start_evidence(objective, x_opt: np.ndarray) -> dict:
+    """The initial extrinsic against the result, frame by frame (the paired test of the
+    restart check), so that a user can tell whether to keep their start when the result is
+    not trusted.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        Its corrections are relative to the initial extrinsic (the zero correction).
+    x_opt : ndarray, shape (7,)
+        The result's local optimum.
+
+    Returns
+    -------
+    dict
+        ``separation_deg`` and ``separation_cm`` (the result from the start), ``mean_px``
+        (the start's mean advantage per frame, positive when it fits better), ``frames`` and
+        ``frames_start_better``, ``p_start_better`` (one-sided; None with one frame) and
+        ``result_clearly_better``: the frames prefer the result by at least one standard error
+        of their paired differences (:data:`RESTART_P`).
+    """
+    x0 = at_every_point(objective, np.zeros(7))
+    x_opt = at_every_point(objective, x_opt)
+    cmp = paired_preference(objective, x_opt, x0)
+    T = objective.transforms(np.vstack([x_opt, x0]))
+    e = pose_error(T[0], T[1])
+    p = cmp["p"] if np.isfinite(cmp["p"]) else None
+    # One frame gives no spread to judge by: never "clearly".
+    clearly = bool(cmp["mean_px"] < 0 and p is not None and (1.0 - p) < RESTART_P)
+    return {"separation_deg": round(float(e["rotation_deg"]), 4),
+            "separation_cm": round(float(e["translation_cm"]), 3),
+            "mean_px": round(float(cmp["mean_px"]), 5), "frames": cmp["frames"],
+            "frames_start_better": cmp["frames_far_better"],
+            "p_start_better": None if p is None else round(float(p), 5),
+            "result_clearly_better": clearly}
+
+
+def start_text(start: dict) -> str:
+    """How the initial extrinsic compares with a result that is not trusted, in words for the
+    verdict line (``start`` from :func:`start_evidence`)."""
+    k, n = start["frames_start_better"], start["frames"]
+    if start["result_clearly_better"]:
+        return (f"the frames do prefer the result to the initial extrinsic ({n - k} of {n} "
+                f"frames, {-start['mean_px']:.2g} px closer to the edges on average), but "
+                "it may still be wrong")
+    return (f"the frames do not clearly prefer the result to the initial extrinsic ({k} of {n} "
+            f"frames fit the start better; the result is {start['separation_deg']:.2g} deg / "
+            f"{start['separation_cm']:.2g} cm from it): keep the initial extrinsic until a "
+            "calibration is judged ok")
+
+
 def resolution(objective, x_opt: np.ndarray) -> np.ndarray:
     """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
     pixel on average at ``x_opt`` (7,), the other axes held; inf for an axis that does not move
@@ -358,6 +409,7 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     # also carries its Hessian's differences times the remaining gradient.
     at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
+           "start": start_evidence(objective, x_opt),
            "intervals": intervals(at_opt, pose_per_px(objective, x_opt),
                                   alignment_px(objective, x_opt), settings.search,
                                   resolution(objective, x_opt))}
@@ -497,6 +549,8 @@ def reliability(result: "CalibrationResult") -> dict:
         "intervals": None if reasons else iv,
         "intervals_not_trusted": iv if reasons else None,
         "evidence": {k: v for k, v in ev.items() if k != "intervals"} or None,
+        # How the start compares, said when the result is not trusted (keep the start?).
+        "start": ev.get("start") if reasons else None,
         "frames": n_frames,
         "in_view": None if in_view is None else round(float(in_view), 4),
         "at_bound": at_bound,
@@ -514,7 +568,8 @@ def verdict_text(rel: dict) -> str:
                 "frames)")
     more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
             "result.json)" if len(reasons) > 1 else "")
-    return f"UNRELIABLE: {reasons[0]}{more}"
+    start = f"; {start_text(rel['start'])}" if rel.get("start") else ""
+    return f"UNRELIABLE: {reasons[0]}{more}{start}"
 
 
 

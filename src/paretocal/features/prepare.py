@@ -110,12 +110,26 @@ def sensor_points(frame: Frame) -> np.ndarray:
 
 
 def frame_rings(frame: Frame, features: FeatureSettings,
-                rng: np.random.Generator | int | None = 0, model: Rings | None = None) -> Rings:
+                rng: np.random.Generator | int | None = 0, model: Rings | None = None,
+                view: np.ndarray | None = None) -> Rings:
     """The rings of a frame's sweep: the file's ring field when plausible, else recovered
     (see :func:`~paretocal.features.rings.recover_rings`; ``model``, an earlier sweep's rings
-    of the same sensor, makes the recovery of an unordered sweep several times cheaper)."""
+    of the same sensor, makes the recovery of an unordered sweep several times cheaper;
+    ``view``, the returns features are taken from (:func:`view_mask`), is where the rings
+    are judged)."""
     return recover_rings(sensor_points(frame), features.ring_method, ring_field=frame.ring,
-                         rng=rng, source=str(frame.points_path), model=model)
+                         rng=rng, source=str(frame.points_path), model=model, view=view)
+
+
+def view_mask(frame: Frame, views, features: FeatureSettings) -> np.ndarray:
+    """The returns of ``frame`` that features are taken from when seen by any of ``views``,
+    pairs ``(Camera, T_cam_lidar)``: in front of the camera and within the margin
+    :func:`prepare_frame` crops the sweep to. Shape (N,), bool."""
+    mask = np.zeros(len(frame.points), dtype=bool)
+    for camera, T in views:
+        mask |= _near_view(frame.points, camera, T, features.z_min,
+                           features.view_margin_px + CROP_EXTRA_PX)
+    return mask
 
 
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
@@ -137,11 +151,10 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.
+    near = view_mask(frame, [(frame.camera, T_init)], features)
     if rings is None:
-        rings = frame_rings(frame, features, rng)
+        rings = frame_rings(frame, features, rng, view=near)
     spacing = rings.spacing_deg()
-    near = _near_view(frame.points, frame.camera, T_init, features.z_min,
-                      features.view_margin_px + CROP_EXTRA_PX)
     pts_s = sensor_points(frame)
     lf: LidarFeatures = lidar_features(
         pts_s[near], ring=rings.ring[near],

@@ -611,7 +611,7 @@ def _label_rings(pts: np.ndarray, te: np.ndarray, inv: np.ndarray, idx: np.ndarr
 MODEL_PASSES = 2
 
 
-def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
+def rings_from_model(points: np.ndarray, model: Rings, view: np.ndarray | None = None) -> Rings:
     """Label a sweep with the line model of an earlier sweep of the same sensor.
 
     Every point takes the nearest of the model's lines ``(a_k, h_k)``, the lines are refitted
@@ -626,6 +626,9 @@ def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
         The sweep in the sensor frame (metres).
     model : Rings
         An earlier sweep's rings (its ``tan_elevation`` and ``offset_m``).
+    view : ndarray, shape (N,), bool, optional
+        Refit the lines to these returns only (where the rings are used, see
+        :func:`recover_rings`); every return is still labelled.
 
     Returns
     -------
@@ -644,7 +647,8 @@ def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
         return Rings(ring, 0, np.zeros(0), np.zeros(0), "lines", 0.0,
                      ["the line model has no rings" if len(a) == 0 else
                       f"no returns beyond {MIN_AXIS_DISTANCE_M} m of the axis"])
-    ti, ii = te[idx], inv[idx]
+    fit = idx if view is None else idx[view[idx]]
+    ti, ii = te[fit], inv[fit]
     s = np.full(len(a), np.nan)
     for _ in range(MODEL_PASSES):
         lab, _ = nearest_line(ti, ii, a, h)
@@ -653,7 +657,8 @@ def rings_from_model(points: np.ndarray, model: Rings) -> Rings:
         a, h, s = np.where(fitted, an, a), np.where(fitted, hn, h), np.where(fitted, sn, s)
     s_typ = float(np.nanmedian(s)) if np.isfinite(s).any() else 0.0
     # No note: ``notes`` are problems the user is told about, and this is not one.
-    return _label_rings(pts, ti, ii, idx, a, h, np.maximum(np.nan_to_num(s, nan=s_typ), s_typ))
+    return _label_rings(pts, te[idx], inv[idx], idx, a, h,
+                        np.maximum(np.nan_to_num(s, nan=s_typ), s_typ))
 
 
 # --- choosing a method ---------------------------------------------------------------------------
@@ -680,7 +685,7 @@ def _as_rings(points: np.ndarray, ring: np.ndarray, method: str, notes=()) -> Ri
 
 def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarray | None = None,
                   rng: np.random.Generator | int | None = 0, source: str = "",
-                  model: Rings | None = None) -> Rings:
+                  model: Rings | None = None, view: np.ndarray | None = None) -> Rings:
     """Rings of one sweep (see the module docstring for ``method``).
 
     Parameters
@@ -700,6 +705,12 @@ def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarr
         (:func:`rings_from_model`, about 10 times cheaper); the full recovery runs only when
         that result is not plausible (fewer than :data:`MIN_RINGS` rings or purity below
         :data:`MIN_PURITY`).
+    view : ndarray, shape (N,), bool, optional
+        The returns the features are taken from (those near a camera's view). When given,
+        every candidate ring set is judged (its ``purity``) on these returns alone: a sweep
+        whose points were moved into one frame (motion-compensated while the vehicle drove
+        and pitched) keeps its returns on their lasers' cones only where it was recorded near
+        that frame's time, and the rings matter only where the features are taken.
 
     Returns
     -------
@@ -712,8 +723,15 @@ def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarr
     where = f"{source}: " if source else ""
     notes: list[str] = []
     pts = np.asarray(points, dtype=np.float64)[:, :3]
+    view = _usable_view(pts, view)
+
+    def judged(r: Rings) -> Rings:
+        if view is not None:
+            r.purity = ring_purity(pts[view], r.ring[view]) if r.n_rings >= MIN_RINGS else 0.0
+        return r
+
     if method in ("auto", "field") and ring_field is not None:
-        r = _as_rings(pts, ring_field, "field")
+        r = judged(_as_rings(pts, ring_field, "field"))
         if method == "field" or (MIN_RINGS <= r.n_rings <= MAX_RINGS
                                   and r.purity >= MIN_PURITY):
             return _noted(r, where)
@@ -723,26 +741,41 @@ def recover_rings(points: np.ndarray, method: str = "auto", ring_field: np.ndarr
     elif method == "field":
         raise ValueError("ring method 'field' needs a ring field")
     if method == "elevation":
-        return _noted(_as_rings(pts, rings_from_elevation(pts), "elevation"), where)
+        return _noted(judged(_as_rings(pts, rings_from_elevation(pts), "elevation")), where)
     if method in ("auto", "scan"):
         scan = rings_from_scan_order(pts)
         n = int(scan.max()) + 1
         if method == "scan":
-            return _noted(_as_rings(pts, scan, "scan"), where)
+            return _noted(judged(_as_rings(pts, scan, "scan")), where)
         if MIN_RINGS <= n <= MAX_RINGS:
-            r = _as_rings(pts, scan, "scan", notes)
+            r = judged(_as_rings(pts, scan, "scan", notes))
             if r.purity >= MIN_PURITY:
                 return r
     if model is not None:
-        r = rings_from_model(pts, model)
+        r = judged(rings_from_model(pts, model, view))
         if r.n_rings >= MIN_RINGS and r.purity >= MIN_PURITY:
             r.notes = notes + r.notes
             return r
         notes.append(f"{where}the earlier sweep's line model gives {r.n_rings} rings with "
                      f"purity {r.purity:.2f}; rings recovered from this sweep instead")
-    r = rings_from_lines(pts, rng)
+    r = judged(rings_from_lines(pts, rng))
     r.notes = notes + r.notes
     return _noted(r, where)
+
+
+#: A view with fewer returns than the smallest ring set the line model can judge (MIN_RINGS
+#: rings of MIN_RING_POINTS each) judges nothing: the whole sweep is judged instead.
+MIN_VIEW_POINTS = MIN_RINGS * MIN_RING_POINTS
+
+
+def _usable_view(points: np.ndarray, view: np.ndarray | None) -> np.ndarray | None:
+    """``view`` as a boolean mask over ``points``, or None when there is none to judge by."""
+    if view is None:
+        return None
+    view = np.asarray(view, dtype=bool)
+    if view.shape != (len(points),):
+        raise ValueError(f"view has shape {view.shape}; expected ({len(points)},)")
+    return view if view.sum() >= MIN_VIEW_POINTS else None
 
 
 def _noted(r: Rings, where: str = "") -> Rings:

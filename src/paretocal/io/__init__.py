@@ -3,7 +3,7 @@
 from .extrinsic import read_extrinsic, write_extrinsic
 from .frame import Frame
 from .layouts import (detect_source, is_rig, load_frames, load_rig_frames, rig_cameras,
-                      rig_source, select_frames)
+                      rig_source, select_frames, source_options)
 
 __all__ = ["Frame", "detect_source", "is_rig", "load_frames", "load_rig_frames", "read_extrinsic",
-           "rig_cameras", "rig_source", "select_frames", "write_extrinsic"]
+           "rig_cameras", "rig_source", "select_frames", "source_options", "write_extrinsic"]

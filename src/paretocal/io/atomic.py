@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -59,6 +60,15 @@ def atomic_path(path: Path):
             os.unlink(tmp)
 
 
+def temporary_pattern(path: Path) -> re.Pattern:
+    """The names :func:`atomic_path` gives the temporaries of ``path``:
+    ``.NAME.XXXXXXXX.tmpSUFFIX``, the X being :func:`tempfile.mkstemp`'s eight random
+    letters, digits or underscores. A kill before the rename leaves one behind."""
+    path = Path(path)
+    return re.compile(re.escape(f".{path.name}.") + "[a-z0-9_]{8}"
+                      + re.escape(".tmp" + path.suffix))
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` atomically (UTF-8)."""
     with atomic_path(path) as tmp:
@@ -75,8 +85,19 @@ def _check_parents(path: Path, option: str) -> None:
             if not parent.is_dir():
                 raise SettingsError(f"{option} {path}: {parent} is a file, not a folder")
             if not os.access(parent, os.W_OK | os.X_OK):
-                raise SettingsError(f"{option} {path}: no permission to write there")
+                raise SettingsError(f"{option} {path}: {_not_writable(parent)}")
             return
+
+
+def _not_writable(folder: Path) -> str:
+    """Why a folder ``os.access`` finds unwritable cannot be written: its file system is
+    mounted read-only (EROFS, which no permission fixes) or there is no permission."""
+    try:
+        if os.statvfs(folder).f_flag & os.ST_RDONLY:
+            return "read-only file system"
+    except (OSError, AttributeError):            # AttributeError: no statvfs (Windows)
+        pass
+    return "no permission to write there"
 
 
 def check_output_dir(path: Path, option: str = "--out") -> Path:
@@ -95,7 +116,7 @@ def check_output_dir(path: Path, option: str = "--out") -> Path:
         if not path.is_dir():
             raise SettingsError(f"{option} {path}: exists and is not a folder")
         if not os.access(path, os.W_OK | os.X_OK):
-            raise SettingsError(f"{option} {path}: no permission to write there")
+            raise SettingsError(f"{option} {path}: {_not_writable(path)}")
         return path
     _check_parents(path, option)
     return path
@@ -118,3 +139,23 @@ def check_output_file(path: Path, option: str = "--out") -> Path:
                             "to write)")
     _check_parents(path, option)
     return path
+
+
+def check_own_folder(path: Path, marks: tuple[str, ...], what: str,
+                     option: str = "--out") -> None:
+    """Refuse a folder ``path`` that is not empty and holds none of ``marks`` (names only a
+    paretocal ``what`` folder holds): writing there would replace the user's files of the same
+    names. Raises :class:`~paretocal.errors.SettingsError` naming ``option`` and ``--force``.
+    """
+    try:
+        names = set(os.listdir(path))
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    except OSError as exc:
+        raise SettingsError(f"{option} {path}: cannot list the folder ({exc.strerror})"
+                            ) from None
+    if names and not names & set(marks):
+        raise SettingsError(f"{option} {path}: the folder is not empty and is not a paretocal "
+                            f"{what} folder (none of {', '.join(marks)}); choose a new or "
+                            f"empty folder, or add --force to write the {what} into it (its "
+                            "files of the same names are replaced)")

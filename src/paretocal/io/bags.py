@@ -19,6 +19,7 @@ any object with the message's attributes (ROS1 and ROS2 spellings: ``K``/``k``, 
 
 from __future__ import annotations
 
+import io
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -27,7 +28,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError, ParetocalError, SettingsError
+from ..errors import InputError, ParetocalError, SettingsError, first_line, quote
+from .paths import kind_of
+from .readers import check_image_size, image_header_size
 
 log = logging.getLogger(__name__)
 
@@ -96,11 +99,6 @@ def _bag_errors() -> tuple[type[BaseException], ...]:
     return AnyReaderError, Reader1Error, Reader2Error, SerdeError
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 @dataclass(frozen=True)
 class Topic:
     """A topic of a bag: its name, message type (``pkg/msg/Name``) and message count."""
@@ -132,6 +130,8 @@ class Bag:
         self._reader = None
         if not self.path.exists():
             raise InputError(f"{self.path}: bag not found")
+        if not (self.path.is_file() or self.path.is_dir()):    # a FIFO would block the reader
+            raise InputError(f"{self.path}: a bag expected, but this is {kind_of(self.path)}")
         if not is_bag(self.path):
             raise InputError(f"{self.path}: not a ROS bag (expected a ROS1 .bag file, a ROS2 "
                              ".db3 or .mcap file, or a rosbag2 folder with metadata.yaml)")
@@ -158,7 +158,7 @@ class Bag:
                 continue
             self._reader = reader
             return self
-        raise InputError(f"{self.path}: not a readable ROS bag ({_first_line(first)})")
+        raise InputError(f"{self.path}: not a readable ROS bag ({first_line(first)})")
 
     def __exit__(self, *exc) -> None:
         if self._reader is not None:
@@ -211,7 +211,7 @@ class Bag:
                 yield int(t), reader.deserialize(raw, conn.msgtype)
         except errors as exc:
             raise InputError(f"{self.path}: cannot read topic {topic!r} "
-                             f"({_first_line(exc)})") from None
+                             f"({first_line(exc)})") from None
 
 
 def extract_hint(path: str | Path) -> str:
@@ -279,7 +279,7 @@ def image_array(msg, where: str = "image") -> np.ndarray:
     """
     enc = str(msg.encoding)
     if enc.lower() not in IMAGE_ENCODINGS:
-        raise InputError(f"{where}: image encoding {enc!r} is not supported (supported: "
+        raise InputError(f"{where}: image encoding {quote(enc)} is not supported (supported: "
                          f"{', '.join(IMAGE_ENCODINGS)}; or CompressedImage JPEG/PNG)")
     kind, ch, conversion = IMAGE_ENCODINGS[enc.lower()]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
@@ -333,11 +333,12 @@ def compressed_image(msg, where: str = "image") -> tuple[bytes, str, np.ndarray]
     else:
         suffix = None
     if suffix is None:
-        raise InputError(f"{where}: compressed image format {fmt!r} is not supported (JPEG and "
+        raise InputError(f"{where}: compressed image format {quote(fmt)} is not supported (JPEG and "
                          "PNG are)")
+    check_image_size(where, image_header_size(io.BytesIO(data)))
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None or img.size == 0:
-        raise InputError(f"{where}: cannot decode the compressed image ({fmt!r}, {len(data)} "
+        raise InputError(f"{where}: cannot decode the compressed image ({quote(fmt)}, {len(data)} "
                          "bytes; corrupt or truncated)")
     return data, suffix, img
 
@@ -376,16 +377,19 @@ def cloud_array(msg, where: str = "cloud") -> np.ndarray:
     for f in msg.fields:
         name = str(f.name)
         if int(f.datatype) not in POINT_FIELD_TYPES:
-            raise InputError(f"{where}: PointCloud2 field {name!r} has datatype {f.datatype}, "
+            raise InputError(f"{where}: PointCloud2 field {quote(name)} has datatype {f.datatype}, "
                              "not one of 1..8 (INT8 .. FLOAT64)")
         if not name or name in names:
-            raise InputError(f"{where}: PointCloud2 field name {name!r} is empty or repeated")
+            raise InputError(f"{where}: PointCloud2 field name {quote(name)} is empty or repeated")
         count = max(int(f.count), 1)
         base = np.dtype(order + POINT_FIELD_TYPES[int(f.datatype)])
+        # Checked before the field's type is made: a count of 10**9 must not reach numpy.
+        nbytes = count * base.itemsize
+        if int(f.offset) < 0 or int(f.offset) + nbytes > step:
+            raise InputError(f"{where}: PointCloud2 field {quote(name)} at offset {f.offset} "
+                             f"({f'{count} x {base.itemsize}' if count > 1 else nbytes} bytes) "
+                             f"lies beyond point_step {step}")
         ftype = np.dtype((base, (count,))) if count > 1 else base
-        if int(f.offset) < 0 or int(f.offset) + ftype.itemsize > step:
-            raise InputError(f"{where}: PointCloud2 field {name!r} at offset {f.offset} "
-                             f"({ftype.itemsize} bytes) lies beyond point_step {step}")
         names.append(name)
         formats.append(ftype)
         offsets.append(int(f.offset))
@@ -443,7 +447,7 @@ def camera_from_info(msg, where: str = "camera_info") -> dict:
     elif not D.any():
         kind = "pinhole"
     else:
-        raise InputError(f"{where}: distortion_model {model!r} is not supported (supported: "
+        raise InputError(f"{where}: distortion_model {quote(model)} is not supported (supported: "
                          f"{', '.join(CAMERA_MODELS)})")
     cam = {"model": kind, "K": K.reshape(3, 3).tolist(), "width": width, "height": height}
     if D.any():

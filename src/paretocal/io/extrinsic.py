@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..errors import InputError
+from ..errors import InputError, excerpt, first_line, key_list, quote
 from ..geometry import check_rigid
 from .atomic import atomic_write_text
-from .readers import read_mapping
+from .readers import MAX_TEXT_BYTES, read_mapping
 
 
 #: Words in TF frame names that say which frame is the LiDAR's and which the camera's.
@@ -60,8 +60,7 @@ def read_extrinsic(path: str | Path, kitti_rect: np.ndarray | None = None) -> np
             return _inverse(T) if inverse else T
     if "transforms" in data:
         return _from_tf(path, data["transforms"])
-    found = ", ".join(map(str, data)) or "none"
-    raise InputError(f"{path}: no extrinsic found (keys: {found}); expected T_cam_lidar (a 4x4 "
+    raise InputError(f"{path}: no extrinsic found (keys: {key_list(data)}); expected T_cam_lidar (a 4x4 "
                      "matrix, or translation + quaternion), T_lidar_cam, transforms (a ROS "
                      "tf_static list) or KITTI's R: and T: lines")
 
@@ -75,9 +74,10 @@ def needs_kitti_rect(path: str | Path) -> bool:
 
 def _kitti_text(path: Path) -> str | None:
     """The text of a KITTI-style ``key: values`` file with ``R:`` and ``T:`` lines, or None."""
-    if path.suffix.lower() in (".yaml", ".yml", ".json") or not path.is_file():
-        return None
     try:
+        if (path.suffix.lower() in (".yaml", ".yml", ".json") or not path.is_file()
+                or path.stat().st_size > MAX_TEXT_BYTES):
+            return None                 # read_mapping names what is wrong
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
         return None
@@ -98,9 +98,9 @@ def _vector(path: Path, name: str, value, names: str) -> np.ndarray:
              else np.asarray(value, dtype=np.float64).ravel())
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{path}: {name} must be {len(names)} numbers or a mapping with keys "
-                         f"{', '.join(names)} ({type(exc).__name__}: {exc})") from None
+                         f"{', '.join(names)} ({type(exc).__name__}: {first_line(exc)})") from None
     if v.size != len(names) or not np.all(np.isfinite(v)):
-        raise InputError(f"{path}: {name} must be {len(names)} finite numbers, got {value!r}")
+        raise InputError(f"{path}: {name} must be {len(names)} finite numbers, got {quote(value)}")
     return v
 
 
@@ -108,7 +108,7 @@ def _pose(path: Path, key: str, value: dict) -> np.ndarray:
     """A 4x4 transform from ``{translation, quaternion_xyzw | quaternion_wxyz | rotation}``."""
     if "translation" not in value:
         raise InputError(f"{path}: {key} needs 'translation' with the rotation (keys found: "
-                         f"{', '.join(map(str, value))})")
+                         f"{key_list(value)})")
     t = _vector(path, f"{key}.translation", value["translation"], "xyz")
     if "quaternion_xyzw" in value:
         q = _vector(path, f"{key}.quaternion_xyzw", value["quaternion_xyzw"], "xyzw")
@@ -118,7 +118,7 @@ def _pose(path: Path, key: str, value: dict) -> np.ndarray:
         name = next((k for k in ("rotation", "quaternion") if k in value), None)
         if name is None:
             raise InputError(f"{path}: {key} needs a rotation: quaternion_xyzw, quaternion_wxyz "
-                             f"or rotation {{x, y, z, w}} (keys found: {', '.join(map(str, value))})")
+                             f"or rotation {{x, y, z, w}} (keys found: {key_list(value)})")
         if not isinstance(value[name], dict):
             raise InputError(f"{path}: {key}.{name} as a list is ambiguous (x, y, z, w or w, x, "
                              "y, z?); write quaternion_xyzw or quaternion_wxyz, or a mapping "
@@ -155,14 +155,15 @@ def _from_tf(path: Path, transforms) -> np.ndarray:
         except (KeyError, TypeError):
             raise InputError(f"{path}: transforms[{k}] lacks header.frame_id, child_frame_id or "
                              "transform.translation/rotation") from None
-        frames.append(f"{parent} -> {child}")
+        frames.append(f"{excerpt(parent, 40)} -> {excerpt(child, 40)}")
         kind = [_frame_kind(parent), _frame_kind(child)]
         if kind in (["camera", "lidar"], ["lidar", "camera"]):
             T = _pose(path, f"transforms[{k}].transform",
                       {"translation": tr, "rotation": rot})
             return T if kind[0] == "camera" else _inverse(T)
+    more = f"; and {len(frames) - 3} more" if len(frames) > 3 else ""
     raise InputError(f"{path}: no transform between a camera and a LiDAR frame (found "
-                     f"{'; '.join(frames)}); frame names must contain one of "
+                     f"{'; '.join(frames[:3])}{more}); frame names must contain one of "
                      f"{', '.join(CAMERA_WORDS)} and one of {', '.join(LIDAR_WORDS)}")
 
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
-from ..errors import InputError, SettingsError
+from ..errors import PATH_CHARS, InputError, SettingsError, excerpt, first_line, key_list, quote
 from ..geometry import check_rigid
 from .bags import extract_hint, is_bag
 from .frame import Frame
-from .paths import missing, not_found
+from .paths import kind_of, missing, not_found
 from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
                       read_cloud, read_image, read_kitti_calib, read_mapping)
 
@@ -70,12 +70,12 @@ def _link_file(path: Path) -> Path:
     that is such a file, naming an existing folder relative to its own, is followed (with a
     note in the log) instead of failing with "folder not found".
     """
-    if path.is_file() and path.stat().st_size < 4096:
+    if kind_of(path) == "a regular file" and path.stat().st_size < 4096:
         try:
             target = path.read_text(encoding="utf-8").strip()
         except (OSError, UnicodeDecodeError):
             return path
-        if target and "\n" not in target and (path.parent / target).is_dir():
+        if target and "\n" not in target and kind_of(path.parent / target) == "a folder":
             log.info("%s: a link file naming %s; following it", path, target)
             return (path.parent / target).resolve()
     return path
@@ -85,10 +85,10 @@ def _pair(root: Path, image_dir: Path, points_dir: Path,
           image_suffixes=IMAGE_SUFFIXES, point_suffixes=POINT_SUFFIXES) -> list[tuple[str, Path, Path]]:
     """Pair images and point clouds by stem; fail if the folders share no stem."""
     image_dir, points_dir = _link_file(image_dir), _link_file(points_dir)
-    if not image_dir.is_dir():
-        raise InputError(not_found(image_dir, "image folder"))
-    if not points_dir.is_dir():
-        raise InputError(not_found(points_dir, "point cloud folder"))
+    if kind_of(image_dir) != "a folder":
+        raise InputError(not_found(image_dir, "image folder", "a folder"))
+    if kind_of(points_dir) != "a folder":
+        raise InputError(not_found(points_dir, "point cloud folder", "a folder"))
     images = _by_stem(_listdir(image_dir), image_suffixes)
     points = _by_stem(_listdir(points_dir), point_suffixes)
     common = sorted(set(images) & set(points))
@@ -227,7 +227,7 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D, model,
                          "starts with 0)")
     key = str(model).strip().lower() if model is not None else "pinhole"
     if key not in _MODELS:
-        raise InputError(f"{path}: {where['model']} {model!r} is not one of "
+        raise InputError(f"{path}: {where['model']} {quote(model)} is not one of "
                          f"{', '.join(_MODELS)}")
     kind = _MODELS[key]
     if D is not None and not np.all(np.isfinite(D)):
@@ -250,7 +250,7 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D, model,
         except (ValueError, OverflowError):
             ok = False
         if not ok:
-            raise InputError(f"{path}: {where['xi']} must be a finite number >= 0, got {xi!r}")
+            raise InputError(f"{path}: {where['xi']} must be a finite number >= 0, got {quote(xi)}")
         xi = float(xi_v)
     elif D is not None:
         if D.size not in _OPENCV_D_SIZES:
@@ -268,7 +268,7 @@ def _numbers(path: Path, name: str, value) -> np.ndarray:
     try:
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as exc:
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        text = first_line(exc)
         if "inhomogeneous" in text or "sequence" in text:
             text = "rows of different lengths"
         raise InputError(f"{path}: {name} is not a list of numbers ({text})") from None
@@ -284,7 +284,7 @@ def _size(path: Path, name: str, value) -> int:
         ok = False
     if not ok:
         raise InputError(f"{path}: {name} must be a positive whole number of pixels, got "
-                         f"{value!r}")
+                         f"{quote(value)}")
     return int(v)
 
 
@@ -301,7 +301,7 @@ def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np
         rows = int(m.get("rows", shape[0] if shape else 1))
         cols = int(m.get("cols", shape[1] if shape else data.size))
     except (TypeError, ValueError, OverflowError) as exc:
-        raise InputError(f"{path}: {name} values are not numbers ({exc})") from None
+        raise InputError(f"{path}: {name} values are not numbers ({first_line(exc)})") from None
     if data.ndim != 1:
         raise InputError(f"{path}: {name}.data must be a flat list of numbers")
     if rows * cols != data.size:
@@ -363,7 +363,7 @@ def _camera_info_message(path: Path, info: dict, prefix: str = "") -> Camera:
     if K is None or (K.size == 9 and not np.any(K)):
         if get("P") is None:
             raise InputError(f"{path}: missing {prefix}K (or P) (keys found: "
-                             f"{', '.join(map(str, info))})")
+                             f"{key_list(info)})")
         P = _numbers(path, name("P"), get("P")).ravel()
         if P.size != 12:
             raise InputError(f"{path}: {name('P')} must hold 12 numbers (row-major 3x4), got "
@@ -374,7 +374,7 @@ def _camera_info_message(path: Path, info: dict, prefix: str = "") -> Camera:
     for key in ("width", "height"):
         if get(key) is None:
             raise InputError(f"{path}: missing {prefix}{key} (keys found: "
-                             f"{', '.join(map(str, info))})")
+                             f"{key_list(info)})")
     D = get("D")
     if D is not None and not isinstance(D, str) and len(np.atleast_1d(D)) == 0:
         D = None
@@ -397,8 +397,9 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
             raise InputError(f"{cpath}: camera_info must be the path of a ROS camera_info YAML "
                              "file (relative to the folder)")
         ipath = root / ref
-        if not ipath.is_file():
-            raise InputError(f"{cpath}: camera_info file {ipath} {missing(ipath)}")
+        if kind_of(ipath) != "a regular file":
+            raise InputError(f"{cpath}: camera_info file {excerpt(ipath, PATH_CHARS)} "
+                             f"{missing(ipath)}")
         info = read_mapping(ipath)
         return (_camera_info_message(ipath, info) if _is_message(info)
                 else _camera_info(ipath, info))
@@ -455,8 +456,8 @@ def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndar
         raise InputError(f"{cpath}: {key} must be the path of a mask image (relative to the "
                          "folder), nonzero on usable pixels")
     mpath = root / ref
-    if not mpath.is_file():
-        raise InputError(f"{cpath}: {key} file {mpath} {missing(mpath)}")
+    if kind_of(mpath) != "a regular file":
+        raise InputError(f"{cpath}: {key} file {excerpt(mpath, PATH_CHARS)} {missing(mpath)}")
     img = decode_image(mpath)
     if img.shape[:2] != (camera.height, camera.width):
         raise InputError(f"{mpath}: mask is {img.shape[1]}x{img.shape[0]} but the calibration "
@@ -486,9 +487,7 @@ def _folder(root: Path) -> Source:
     if data.get("lidar_pose") is not None:
         pose = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
     layout = _points_layout(cpath, data.get("points"))
-    options = {}
-    if data.get("init_error") is not None:
-        options["init_error"] = _init_error(cpath, data["init_error"])
+    options = _options(cpath, data)
     pairs = _pair(root, root / "images", root / "points")
     credit = _credit(cpath, data)
     return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
@@ -502,7 +501,7 @@ def _credit(cpath: Path, data: dict) -> str | None:
     value = data.get("credit")
     if value is not None and (not isinstance(value, str) or not value.strip()):
         raise InputError(f"{cpath}: credit must be a line of text (the data's credit for "
-                         f"figures), got {value!r}")
+                         f"figures), got {quote(value)}")
     return value.strip() if value else None
 
 
@@ -527,7 +526,7 @@ def _rig_entries(cpath: Path, data: dict) -> list[tuple[str, dict]]:
         items = []
         for name, entry in cams.items():
             if isinstance(entry, dict) and entry.get("name") not in (None, name):
-                raise InputError(f"{cpath}: cameras.{name}.name is {entry['name']!r}; leave it "
+                raise InputError(f"{cpath}: cameras.{excerpt(name)}.name is {quote(entry['name'])}; leave it "
                                  "out or make it the key")
             items.append((name, entry))
     elif isinstance(cams, list):
@@ -539,7 +538,7 @@ def _rig_entries(cpath: Path, data: dict) -> list[tuple[str, dict]]:
         raise InputError(f"{cpath}: cameras lists no camera")
     out, seen = [], set()
     for i, (name, entry) in enumerate(items):
-        where = f"cameras[{i}]" if isinstance(cams, list) else f"cameras.{name}"
+        where = f"cameras[{i}]" if isinstance(cams, list) else f"cameras.{excerpt(name)}"
         if not isinstance(entry, dict):
             raise InputError(f"{cpath}: {where} must be a mapping with name, camera, "
                              "T_cam_lidar and images")
@@ -547,14 +546,14 @@ def _rig_entries(cpath: Path, data: dict) -> list[tuple[str, dict]]:
             raise InputError(f"{cpath}: {where}.name is missing (each camera needs a name)")
         name = str(name).strip()
         if not re.fullmatch(r"[A-Za-z0-9_.-]+", name) or name in (".", ".."):
-            raise InputError(f"{cpath}: {where}.name {name!r}: use letters, digits, '_', '-' "
+            raise InputError(f"{cpath}: {where}.name {quote(name)}: use letters, digits, '_', '-' "
                              "and '.' only (it names the camera's output folder)")
         if name in seen:
             raise InputError(f"{cpath}: cameras: the name {name!r} is given twice")
         seen.add(name)
         unknown = sorted(set(map(str, entry)) - set(RIG_CAMERA_KEYS))
         if unknown:
-            raise InputError(f"{cpath}: cameras.{name}: unknown key(s) {', '.join(unknown)} "
+            raise InputError(f"{cpath}: cameras.{name}: unknown key(s) {key_list(unknown)} "
                              f"(expected {', '.join(RIG_CAMERA_KEYS)})")
         out.append((name, entry))
     return out
@@ -582,8 +581,9 @@ def _rig_camera(root: Path, cpath: Path, name: str, entry: dict, shared: dict) -
         raise InputError(f"{cpath}: {prefix}.images is missing: the camera's image folder, "
                          "relative to the rig folder")
     image_dir = root / images
-    if not _link_file(image_dir).is_dir():
-        raise InputError(f"{cpath}: {prefix}.images: folder {image_dir} {missing(image_dir)}")
+    if kind_of(_link_file(image_dir)) != "a folder":
+        raise InputError(f"{cpath}: {prefix}.images: folder {excerpt(image_dir, PATH_CHARS)} "
+                         f"{missing(image_dir, 'a folder')}")
     pairs = _pair(root, image_dir, root / "points")
     frames = [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=shared["pose"],
                          bin_layout=shared["layout"], credit=shared["credit"]) for s, i, p in pairs]
@@ -602,7 +602,7 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
     """
     root = Path(source)
     if not root.is_dir():
-        raise InputError(not_found(root, "source folder"))
+        raise InputError(not_found(root, "source folder", "a folder"))
     cpath = root / "calib.yaml"
     data = read_mapping(cpath)
     if data.get("cameras") is None:
@@ -612,12 +612,10 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
     if clash:
         raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
                          "given; with several cameras each entry of cameras holds its own")
-    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")), "options": {},
-              "credit": _credit(cpath, data)}
+    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")),
+              "options": _options(cpath, data), "credit": _credit(cpath, data)}
     if data.get("lidar_pose") is not None:
         shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
-    if data.get("init_error") is not None:
-        shared["options"]["init_error"] = _init_error(cpath, data["init_error"])
     return [(name, _rig_camera(root, cpath, name, entry, shared)) for name, entry in entries]
 
 
@@ -641,9 +639,29 @@ def _points_layout(cpath: Path, section) -> str | None:
     if name is None:
         return None
     if str(name).lower() not in BIN_LAYOUTS:
-        raise InputError(f"{cpath}: points.layout {name!r} is not one of "
+        raise InputError(f"{cpath}: points.layout {quote(name)} is not one of "
                          f"{', '.join(BIN_LAYOUTS)}")
     return str(name).lower()
+
+
+def _options(cpath: Path, data: dict) -> dict:
+    """What calib.yaml states about the dataset (:attr:`Source.options`)."""
+    if data.get("init_error") is None:
+        return {}
+    return {"init_error": _init_error(cpath, data["init_error"])}
+
+
+def source_options(source: str | Path | Source) -> dict:
+    """What a dataset states about itself (:attr:`Source.options`: calib.yaml's
+    ``init_error`` as ``(deg, m)``), read from its calib.yaml alone: no frame is listed, so
+    nothing is said twice. A source with no calib.yaml (KITTI) states nothing; a rig folder
+    states it for all its cameras."""
+    if isinstance(source, Source):
+        return dict(source.options)
+    cpath = Path(source) / "calib.yaml"
+    if not cpath.is_file():
+        return {}
+    return _options(cpath, read_mapping(cpath))
 
 
 def _init_error(cpath: Path, value) -> tuple[float, float]:
@@ -657,7 +675,7 @@ def _init_error(cpath: Path, value) -> tuple[float, float]:
         ok = False
     if not ok:
         raise InputError(f"{cpath}: init_error must be [DEG, M] (or rotation_deg and "
-                         f"translation_m), two positive numbers, got {value!r}")
+                         f"translation_m), two positive numbers, got {quote(value)}")
     return deg, m
 
 
@@ -673,8 +691,9 @@ def detect_source(source: Path, camera_index: int = 2) -> Source:
         raise InputError(f"{root}: source must be a folder")
     if not 0 <= camera_index <= 3:
         raise SettingsError(f"--camera {camera_index}: must be 0, 1, 2 or 3")
-    if (root / "calib.yaml").is_file() or (root / "calib.yaml").is_symlink():
-        return _folder(root)      # a broken link there is the folder's calib.yaml, unreadable
+    if kind_of(root / "calib.yaml") or (root / "calib.yaml").is_symlink():
+        # The folder's calib.yaml, read or refused by name: a broken link, a FIFO, a folder.
+        return _folder(root)
     if (root / "training").is_dir() and not (root / "velodyne").is_dir():
         root = root / "training"
     if (root / "velodyne").is_dir() and (root / "calib").is_dir():

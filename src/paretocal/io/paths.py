@@ -1,11 +1,15 @@
 """What is wrong with a path that leads nowhere: a symbolic link loop or a dangling link, told
-apart from a plain missing file so that messages say which."""
+apart from a plain missing file so that messages say which; and what stands at a path that
+should be a plain file or folder (a run folder's own files are never followed through a link)."""
 
 from __future__ import annotations
 
 import errno
 import os
+import stat
 from pathlib import Path
+
+from ..errors import InputError
 
 
 def broken_link(path: Path) -> str | None:
@@ -47,13 +51,87 @@ def broken_link(path: Path) -> str | None:
 
 
 
-def missing(path: Path) -> str:
-    """Why ``path`` cannot be opened, for a message: "not found", or "not reachable: ..." when
-    a symbolic link on the way leads nowhere (:func:`broken_link`)."""
+#: What a stat mode is, in words, for messages.
+_KINDS = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a folder"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"))
+
+
+def kind_of(path: Path) -> str | None:
+    """What stands at ``path`` (links followed), in words: ``"a regular file"``, ``"a
+    folder"``, ``"a character device"`` (``/dev/zero``), ``"a named pipe (FIFO)"``, ...; None
+    when nothing can be reached there. Only the file's metadata is read, so a FIFO is never
+    opened (which would wait for a writer)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    return next((words for test, words in _KINDS if test(mode)), "not a regular file")
+
+
+def missing(path: Path, want: str = "a regular file") -> str:
+    """Why ``path`` cannot be opened as ``want`` (``"a regular file"`` or ``"a folder"``), for
+    a message: ``"is a character device, not a regular file"`` when something else stands
+    there, else "not found", "not reachable: ..." when a symbolic link on the way leads
+    nowhere (:func:`broken_link`), or "cannot be reached (...)" with the system's reason (a
+    name too long, a folder on the way without permission)."""
+    kind = kind_of(path)
+    if kind is not None and kind != want:
+        return f"is {kind}, not {want}"
+    if "\0" in str(path):
+        return "cannot be reached (the name holds a NUL character)"
     link = broken_link(path)
-    return f"not reachable: {link}" if link else "not found"
+    if link:
+        return f"not reachable: {link}"
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOENT, errno.ENOTDIR):
+            return f"cannot be reached ({exc.strerror})"    # a name too long, no permission
+    return "not found"
 
 
-def not_found(path: Path, what: str) -> str:
-    """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere."""
-    return f"{path}: {what} {missing(path)}"
+def not_found(path: Path, what: str, want: str = "a regular file") -> str:
+    """``"PATH: WHAT not found"``, or why a symbolic link on the way leads nowhere, or what
+    stands there instead of ``want`` (:func:`missing`)."""
+    return f"{path}: {what} {missing(path, want)}"
+
+
+def odd_kind(path: Path, folder: bool = False) -> str | None:
+    """What stands at ``path`` when it is not a plain file (``folder``: not a plain folder),
+    without following a symbolic link there: ``"a symbolic link"``, ``"a directory"``, ``"a
+    file"`` or ``"a special file"``; None when it is the expected kind or absent."""
+    try:
+        mode = os.lstat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if (stat.S_ISDIR if folder else stat.S_ISREG)(mode):
+        return None
+    return ("a directory" if stat.S_ISDIR(mode) else "a file" if stat.S_ISREG(mode)
+            else "a special file")
+
+
+def not_plain(path: Path, kind: str, what: str = "a plain file") -> InputError:
+    """The one-line error for ``path``, which is ``kind`` (:func:`odd_kind`) instead of
+    ``what``."""
+    return InputError(f"{path}: is {kind}, not {what}; remove it (paretocal does not follow "
+                      "or replace it)")
+
+
+def open_plain(path: Path, what: str = "a plain file"):
+    """``path`` opened for reading in binary, never through a symbolic link at its last
+    component and never blocking on a FIFO. Raises FileNotFoundError when it is absent and
+    :func:`not_plain`'s error (naming ``what`` it should be) when it is not a plain file."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.EISDIR, errno.ENXIO):
+            raise not_plain(path, odd_kind(path) or "a special file", what) from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise not_plain(path, odd_kind(path) or "a special file", what)
+    return os.fdopen(fd, "rb")

@@ -53,8 +53,8 @@ import cv2
 import numpy as np
 import yaml
 
-from ..errors import InputError
-from .paths import not_found
+from ..errors import InputError, excerpt, first_line, is_name, key_list, quote
+from .paths import kind_of, not_found
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,45 @@ TIME_FIELDS = ("time", "t", "timestamp", "offset_time")
 PLAUSIBLE_SWEEP_S = (1e-3, 1.0)
 #: How a user declares the layout of .bin files (the text put into error messages).
 DECLARE_LAYOUT = "points: {{layout: {}}} in calib.yaml"
+
+# --- limits ---------------------------------------------------------------------------------------
+# What an input file may hold, or its header claim, checked before anything is allocated for it
+# (a stat and a header read: the normal path costs nothing measurable). Each is far beyond any
+# real sensor or file, so that only a corrupt or hostile file meets it; docs/bad_input.md lists
+# them with their messages.
+
+#: Bytes of a text input: calib.yaml, camera_info, --config, --init, a batch manifest, KITTI
+#: calibration text. These hold a few kilobytes; a manifest about 100 bytes per entry, so 8 MiB
+#: is some 80,000 entries. PyYAML parses 0.3-1 MB per second on a busy machine: the largest
+#: file accepted takes up to half a minute, where a 200 MB file would take over ten minutes.
+MAX_TEXT_BYTES = 8 << 20
+_TEXT = "YAML, JSON, CSV or calibration text file"
+#: Most values (scalars, lists and mappings) a YAML file may hold once its aliases are expanded.
+#: A value costs at most about 100 bytes as a Python object (8 as a number in numpy), so one
+#: file can make the readers build at most about 100 MB; the files paretocal reads (calib.yaml,
+#: camera_info, --config, --init) hold a few hundred values. Aliases themselves are allowed:
+#: only their expansion is bounded ("billion laughs": nine nested anchors of nine aliases each
+#: are 340 bytes of text and 387 million values, which numpy turns into 2.9 GB).
+MAX_YAML_VALUES = 1_000_000
+#: Points in one cloud file, by its header (a .npy's shape, a PCD's POINTS, a PLY's vertex
+#: count) or size. The densest LiDARs give a few hundred thousand points a sweep (128 beams at
+#: 2048 columns: 262,144); 2**25 (33.5 million) leaves room for sweeps accumulated into one file.
+MAX_CLOUD_POINTS = 1 << 25
+#: Bytes of one cloud file, and of the data its header says it holds (points x record size):
+#: MAX_CLOUD_POINTS records of 64 bytes, above the widest records drivers write (32 to 48
+#: bytes: x, y, z, intensity, ring, time and padding). 2 GiB.
+MAX_CLOUD_BYTES = MAX_CLOUD_POINTS * 64
+#: Values per point in a PCD header (the sum of its COUNTs), checked before a column is made
+#: for each: a LiDAR point has under a dozen; PCL's widest point type (ShapeContext1980) 1989.
+MAX_POINT_VALUES = 4096
+#: Pixels of an image (width x height), read from the PNG or JPEG header before decoding. The
+#: largest camera sensors have about 150 million pixels, automotive ones 2 to 8 million; a
+#: larger header (a decompression bomb: a 20000 x 20000 PNG of 1 MB decodes to 1.2 GB) is
+#: refused. 2**28 = 268 million, e.g. 16384 x 16384.
+MAX_IMAGE_PIXELS = 1 << 28
+#: Bytes of an image file: an uncompressed image of MAX_IMAGE_PIXELS 16-bit RGBA pixels
+#: (8 bytes each) is the largest a camera image can be. 2 GiB.
+MAX_IMAGE_BYTES = MAX_IMAGE_PIXELS * 8
 
 _TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
 _UNIT_WORDS = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
@@ -220,6 +259,7 @@ def read_cloud(path: Path, bin_layout: str | None = None) -> Cloud:
     suffix = path.suffix.lower()
     notes: list[str] = []
     try:
+        _require_size(path, MAX_CLOUD_BYTES, "point cloud file")
         if suffix == ".bin":
             cols, used = _read_bin(path, path.read_bytes(), layout)
         elif suffix == ".npy":
@@ -236,7 +276,7 @@ def read_cloud(path: Path, bin_layout: str | None = None) -> Cloud:
     except OSError as exc:
         raise InputError(f"{path}: cannot read point cloud ({exc.strerror or exc})") from None
     except ValueError as exc:
-        raise InputError(f"{path}: cannot read point cloud ({_first_line(exc)})") from None
+        raise InputError(f"{path}: cannot read point cloud ({first_line(exc)})") from None
     if layout is not None and used is None:
         notes.append(f"layout {layout!r} ignored: it applies to .bin files and plain .npy "
                      f"arrays, and this {suffix} file names its fields")
@@ -249,7 +289,7 @@ def _layout_name(path: Path, name) -> str | None:
         return None
     key = name.strip().lower() if isinstance(name, str) else None
     if key not in BIN_LAYOUTS:
-        raise InputError(f"{path}: unknown point layout {name!r} (known: "
+        raise InputError(f"{path}: unknown point layout {quote(name)} (known: "
                          f"{', '.join(BIN_LAYOUTS)})")
     return key
 
@@ -266,7 +306,7 @@ def _assemble(path: Path, cols: dict[str, np.ndarray], fmt: str, layout: str | N
     missing = [c for c in "xyz" if c not in by_name]
     if missing:
         raise InputError(f"{path}: no {', '.join(repr(c) for c in missing)} field "
-                         f"(fields: {', '.join(cols) or 'none'}); x, y and z are required")
+                         f"(fields: {key_list(cols)}); x, y and z are required")
 
     def pick(aliases: tuple[str, ...]) -> tuple[str | None, np.ndarray | None]:
         return next((by_name[a] for a in aliases if a in by_name), (None, None))
@@ -318,22 +358,22 @@ def _num(v) -> str:
 def _ring_numbers(path: Path, name: str, col: np.ndarray) -> np.ndarray:
     """The ring field as int16 after checking that it holds whole numbers 0..255."""
     if col.dtype.kind not in "iuf":
-        raise InputError(f"{path}: field {name!r} has type {col.dtype}; ring numbers must be "
+        raise InputError(f"{path}: field {quote(name)} has type {col.dtype}; ring numbers must be "
                          "whole numbers 0..255")
     if col.dtype.kind == "f":
         bad = ~np.isfinite(col)
         if bad.any():
-            raise InputError(f"{path}: field {name!r} holds NaN or infinite values at "
+            raise InputError(f"{path}: field {quote(name)} holds NaN or infinite values at "
                              f"{int(bad.sum())} of {len(col)} points; ring numbers must be whole "
                              "numbers 0..255")
     lo, hi = col.min(), col.max()
     if lo < 0 or hi > 255:
-        raise InputError(f"{path}: field {name!r} holds values outside 0..255 "
+        raise InputError(f"{path}: field {quote(name)} holds values outside 0..255 "
                          f"(min {_num(lo)}, max {_num(hi)})")
     if col.dtype.kind == "f":
         frac = col != np.round(col)
         if frac.any():
-            raise InputError(f"{path}: field {name!r} holds values that are not whole numbers "
+            raise InputError(f"{path}: field {quote(name)} holds values that are not whole numbers "
                              f"(e.g. {_num(col[frac][0])}); ring numbers must be whole numbers "
                              "0..255")
     return col.astype(np.int16)
@@ -343,14 +383,14 @@ def _seconds(path: Path, name: str, col: np.ndarray,
              notes: list[str]) -> tuple[np.ndarray, str]:
     """The time field in float64 seconds and the unit chosen (module docstring: the rule)."""
     if col.dtype.kind not in "iuf":
-        raise InputError(f"{path}: field {name!r} has type {col.dtype}; expected numbers")
+        raise InputError(f"{path}: field {quote(name)} has type {col.dtype}; expected numbers")
     integer = col.dtype.kind in "iu"
     if integer:
         span = int(col.max()) - int(col.min())            # exact, even for 64-bit epochs
     else:
         bad = ~np.isfinite(col)
         if bad.any():
-            raise InputError(f"{path}: field {name!r} holds NaN or infinite times at "
+            raise InputError(f"{path}: field {quote(name)} holds NaN or infinite times at "
                              f"{int(bad.sum())} of {len(col)} points")
         span = float(col.max()) - float(col.min())
     order = ("ns", "us", "ms", "s") if integer else ("s", "ms", "us", "ns")
@@ -360,15 +400,15 @@ def _seconds(path: Path, name: str, col: np.ndarray,
     if unit is None:
         unit = order[0]
         if span == 0:
-            notes.append(f"time field {name!r}: every point has the same time, so its unit "
+            notes.append(f"time field {quote(name)}: every point has the same time, so its unit "
                          f"cannot be told; read as {_UNIT_WORDS[unit]}")
         else:
-            notes.append(f"time field {name!r}: its {kind} span {_num(span)} across the cloud, "
+            notes.append(f"time field {quote(name)}: its {kind} span {_num(span)} across the cloud, "
                          f"which is no plausible sweep duration ({lo * 1e3:g} ms .. {hi:g} s) "
                          f"in s, ms, us or ns; read as {_UNIT_WORDS[unit]} (a span of "
                          f"{span / _TIME_UNITS[unit]:.6g} s)")
     elif not integer and unit != "s":
-        notes.append(f"time field {name!r}: its floats span {_num(span)} across the cloud, "
+        notes.append(f"time field {quote(name)}: its floats span {_num(span)} across the cloud, "
                      f"read as {_UNIT_WORDS[unit]} ({span / _TIME_UNITS[unit]:.3g} s)")
     t = col.astype(np.float64)
     if unit != "s":
@@ -418,8 +458,21 @@ def _read_bin(path: Path, raw: bytes, declared: str | None) -> tuple[dict[str, n
                              "record's ring being a whole number 0..255; declare it "
                              f"({DECLARE_LAYOUT.format(fits[0])}), or declare 'kitti' if the "
                              "file is KITTI's")
+    _check_points(path, size // BIN_LAYOUTS[name].record_bytes, size, f"its size ({name} layout)")
     arr = np.frombuffer(raw, dtype=BIN_LAYOUTS[name].dtype)
     return {c: arr[c] for c in arr.dtype.names}, name
+
+
+def _check_points(path: Path, n: int, nbytes: int, source: str) -> None:
+    """Refuse a cloud of more than :data:`MAX_CLOUD_POINTS` points or :data:`MAX_CLOUD_BYTES`
+    bytes of data (``source`` says where the counts come from: the header, the size) before
+    anything is allocated for it."""
+    if n > MAX_CLOUD_POINTS:
+        raise InputError(f"{path}: {n:,} points by {source}, more than the {MAX_CLOUD_POINTS:,} "
+                         "a point cloud file may hold")
+    if nbytes > MAX_CLOUD_BYTES:
+        raise InputError(f"{path}: {nbytes:,} bytes of point data by {source}, more than the "
+                         f"{_mib(MAX_CLOUD_BYTES)} a point cloud file may hold")
 
 
 def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
@@ -447,9 +500,7 @@ def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
 
 def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], str | None]:
     """The columns of a ``.npy`` file: a record array's fields or a plain array's columns."""
-    with open(path, "rb") as fh:
-        if fh.read(6) != b"\x93NUMPY":
-            raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
+    _npy_header(path)
     arr = np.load(path, allow_pickle=False)
     if arr.dtype.names:
         if arr.ndim == 0:
@@ -461,7 +512,7 @@ def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], 
             ft = arr.dtype.fields[name][0]
             if ft.shape or ft.kind not in "iuf":
                 if name.lower() in wanted:
-                    raise InputError(f"{path}: field {name!r} has type {ft}; expected one real "
+                    raise InputError(f"{path}: field {quote(name)} has type {ft}; expected one real "
                                      "number per point")
                 continue
             cols[name] = arr[name]
@@ -487,6 +538,32 @@ def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], 
     if arr.dtype.kind not in "iuf":
         raise InputError(f"{path}: expected real numbers, got dtype {arr.dtype}")
     return {n: arr[:, j] for j, n in enumerate(names)}, declared
+
+
+def _npy_header(path: Path) -> None:
+    """Check what a ``.npy`` header claims before numpy allocates it: the points (records, or
+    rows of a plain array) within :data:`MAX_CLOUD_POINTS`, and the data within the file (a
+    header saying (10**12, 4) must not make numpy reserve 29 TiB)."""
+    fmt = np.lib.format
+    with open(path, "rb") as fh:
+        if fh.read(6) != b"\x93NUMPY":
+            raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
+        fh.seek(0)
+        version = fmt.read_magic(fh)
+        read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}.get(
+            version, lambda f: fmt._read_array_header(f, version))
+        shape, _, dtype = read(fh)
+        have = os.fstat(fh.fileno()).st_size - fh.tell()
+    if dtype.hasobject:
+        return                                  # np.load refuses objects (allow_pickle=False)
+    count = int(np.prod(shape, dtype=object))
+    rows = count if dtype.names or len(shape) < 2 else count // max(shape[-1], 1)
+    need = count * dtype.itemsize
+    _check_points(path, rows, need, f"its header (shape {shape}, {dtype})")
+    if need > have:
+        raise InputError(f"{path}: the .npy header says shape {shape} of {dtype} ({need:,} "
+                         f"bytes), but {have:,} bytes of data follow; the file is truncated or "
+                         "its header is wrong")
 
 
 def _loadtxt(body: bytes, **kw) -> np.ndarray:
@@ -518,10 +595,6 @@ def _ascii_column(col: np.ndarray, dtype: str) -> np.ndarray:
     return col.astype(dtype)
 
 
-def _first_line(exc: Exception) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
 
 # --- PCD (PCL) -----------------------------------------------------------------------------------
 
@@ -550,7 +623,8 @@ def _pcd_header(path: Path, raw: bytes) -> tuple[dict[str, list[str]], int]:
             continue
         key, *values = line.split()
         if not lines and key.upper() not in ("VERSION", "FIELDS"):
-            raise InputError(f"{path}: not a PCD file: the header starts with {key!r} "
+            start = quote(key) if is_name(key) else "a word that is no PCD keyword"
+            raise InputError(f"{path}: not a PCD file: the header starts with {start} "
                              "instead of VERSION or FIELDS")
         entries[key.upper()] = values
         lines.append(line)
@@ -562,7 +636,7 @@ def _pcd_int(path: Path, entries: dict[str, list[str]], key: str) -> int:
         value = int(entries[key][0])
     except (KeyError, IndexError, ValueError):
         raise InputError(f"{path}: PCD header {key} must be a non-negative integer, got "
-                         f"{' '.join(entries.get(key, [])) or 'nothing'}") from None
+                         f"{excerpt(' '.join(entries.get(key, [])) or 'nothing')}") from None
     if value < 0:
         raise InputError(f"{path}: PCD header {key} must be a non-negative integer, got {value}")
     return value
@@ -577,6 +651,7 @@ def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     entries, offset = _pcd_header(path, raw)
     fields, types, sizes, counts = _pcd_fields(path, entries)
     n, data = _pcd_size(path, entries)
+    _check_points(path, n, n * sum(s * c for s, c in zip(sizes, counts)), "its header")
     # One column per field and count; padding fields are named "_" and may repeat.
     names, formats = [], []
     for k, (name, t, s, c) in enumerate(zip(fields, types, sizes, counts)):
@@ -584,7 +659,7 @@ def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
             names.append(name if c == 1 and name != "_" else f"_{k}_{j}_{name}")
             formats.append(_PCD_TYPES[(t, s)])
     if len(set(names)) != len(names):
-        raise InputError(f"{path}: PCD header FIELDS names a field twice ({' '.join(fields)})")
+        raise InputError(f"{path}: PCD header FIELDS names a field twice ({excerpt(' '.join(fields))})")
     body = raw[offset:]
     if n == 0:
         return {name: np.zeros(0, f) for name, f in zip(names, formats) if name[0] != "_"}
@@ -623,12 +698,15 @@ def _pcd_fields(path: Path, entries: dict) -> tuple[list[str], list[str], list[i
     types = [t.upper() for t in entries["TYPE"]]
     for name, t, s, c in zip(fields, types, sizes, counts):
         if (t, s) not in _PCD_TYPES:
-            raise InputError(f"{path}: PCD field {name!r} has unsupported TYPE {t} SIZE {s}")
+            raise InputError(f"{path}: PCD field {quote(name)} has unsupported TYPE {t} SIZE {s}")
         if c < 1:
-            raise InputError(f"{path}: PCD field {name!r} has COUNT {c}")
+            raise InputError(f"{path}: PCD field {quote(name)} has COUNT {c}")
+    if sum(counts) > MAX_POINT_VALUES:
+        raise InputError(f"{path}: PCD header COUNT sums to {sum(counts):,} values per point, "
+                         f"more than the {MAX_POINT_VALUES:,} a point may hold")
     for name, c in zip(fields, counts):
         if name.lower() in _SCALAR_FIELDS and c != 1:
-            raise InputError(f"{path}: PCD field {name!r} has COUNT {c}, expected 1")
+            raise InputError(f"{path}: PCD field {quote(name)} has COUNT {c}, expected 1")
     return fields, types, sizes, counts
 
 
@@ -646,7 +724,7 @@ def _pcd_size(path: Path, entries: dict) -> tuple[int, str]:
         raise InputError(f"{path}: PCD header says WIDTH {width} x HEIGHT {height} but POINTS {n}")
     data = (entries["DATA"] or [""])[0].lower()
     if data not in _PCD_DATA:
-        raise InputError(f"{path}: PCD header DATA {data!r} is not one of {', '.join(_PCD_DATA)}")
+        raise InputError(f"{path}: PCD header DATA {quote(data)} is not one of {', '.join(_PCD_DATA)}")
     return n, data
 
 
@@ -656,7 +734,7 @@ def _pcd_ascii(path: Path, body: bytes, names: list[str], formats: list[str],
     try:
         table = _loadtxt(body)
     except ValueError as exc:
-        raise InputError(f"{path}: PCD ascii data cannot be parsed ({_first_line(exc)})") from None
+        raise InputError(f"{path}: PCD ascii data cannot be parsed ({first_line(exc)})") from None
     if table.shape != (n, len(names)):
         raise InputError(f"{path}: PCD ascii data has {table.shape[0]} rows of "
                          f"{table.shape[1] if table.size else 0} values; the header says "
@@ -691,7 +769,7 @@ def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
         arr = PointCloud.from_fileobj(io.BytesIO(head.encode() + body)).pc_data
     except Exception as exc:  # any decoder failure means a corrupt file
         raise InputError(f"{path}: PCD binary_compressed data cannot be decoded "
-                         f"({_first_line(exc)}); the file is truncated or corrupt") from None
+                         f"({first_line(exc)}); the file is truncated or corrupt") from None
     if arr.ndim != 1 or len(arr) != n or len(arr.dtype.names or ()) != sum(counts):
         raise InputError(f"{path}: PCD binary_compressed data holds {arr.size} points, the header "
                          f"says POINTS {n}")
@@ -726,11 +804,13 @@ def _read_ply(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     _, n, props = elements[iv]
     lists = [p for p, t in props if t is None]
     if lists:
-        raise InputError(f"{path}: PLY vertex property {lists[0]!r} is a list; points need "
+        raise InputError(f"{path}: PLY vertex property {quote(lists[0])} is a list; points need "
                          "scalar properties")
     pnames = [p for p, _ in props]
     if len(set(pnames)) != len(pnames):
         raise InputError(f"{path}: PLY vertex element names a property twice")
+    _check_points(path, n, n * sum(np.dtype(t).itemsize for _, t in props),
+                  "its header (element vertex)")
     body = raw[end.end():]
     if fmt == "ascii":
         return _ply_ascii(path, body, elements, iv)
@@ -738,7 +818,7 @@ def _read_ply(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     start = 0
     for name, count, eprops in elements[:iv]:
         if any(t is None for _, t in eprops):
-            raise InputError(f"{path}: PLY element {name!r} before 'vertex' has list "
+            raise InputError(f"{path}: PLY element {quote(name)} before 'vertex' has list "
                              "properties; binary files with that layout are not supported")
         start += count * sum(np.dtype(t).itemsize for _, t in eprops)
     dtype = np.dtype([(p, endian + t) for p, t in props])
@@ -763,7 +843,7 @@ def _ply_header(path: Path, header: list[str]) -> tuple[str, list[list]]:
             if words[0] == "format":
                 fmt = words[1]
                 if fmt not in _PLY_FORMATS:
-                    raise InputError(f"{path}: unsupported PLY format {fmt!r} (supported: "
+                    raise InputError(f"{path}: unsupported PLY format {quote(fmt)} (supported: "
                                      f"{', '.join(_PLY_FORMATS)})")
             elif words[0] == "element":
                 elements.append([words[1], int(words[2]), []])
@@ -774,7 +854,7 @@ def _ply_header(path: Path, header: list[str]) -> tuple[str, list[list]]:
             else:
                 raise ValueError
         except (IndexError, ValueError):
-            raise InputError(f"{path}: malformed PLY header line {line!r}") from None
+            raise InputError(f"{path}: malformed PLY header line {quote(line)}") from None
     if fmt is None:
         raise InputError(f"{path}: PLY header has no 'format' line")
     return fmt, elements
@@ -785,7 +865,7 @@ def _ply_property(path: Path, words: list[str]) -> tuple[str, str | None]:
     if words[1] == "list":
         return words[4], None
     if words[1] not in _PLY_TYPES:
-        raise InputError(f"{path}: PLY property {words[2]!r} has unknown type {words[1]!r}")
+        raise InputError(f"{path}: PLY property {quote(words[2])} has unknown type {quote(words[1])}")
     return words[2], _PLY_TYPES[words[1]]
 
 
@@ -796,11 +876,16 @@ def _ply_ascii(path: Path, body: bytes, elements: list[list], iv: int) -> dict[s
     if n == 0:
         return {p: np.zeros(0, t) for p, t in props}
     skip = sum(e[1] for e in elements[:iv])
+    lines = body.count(b"\n") + (not body.endswith(b"\n"))
+    if skip + n > lines:
+        # Checked first: numpy reserves max_rows rows before it parses any.
+        raise InputError(f"{path}: PLY ascii data has {lines} lines; the header says {skip} "
+                         f"before the {n} vertex lines (truncated or wrong header)")
     try:
         table = _loadtxt(body, skiprows=skip, max_rows=n)
     except ValueError as exc:
         raise InputError(f"{path}: PLY ascii vertex data cannot be parsed "
-                         f"({_first_line(exc)})") from None
+                         f"({first_line(exc)})") from None
     if table.shape != (n, len(props)):
         raise InputError(f"{path}: PLY ascii data has {table.shape[0]} vertex lines of "
                          f"{table.shape[1] if table.size else 0} values; the header says "
@@ -809,14 +894,29 @@ def _ply_ascii(path: Path, body: bytes, elements: list[list], iv: int) -> dict[s
 
 
 def _require_file(path: Path, what: str) -> None:
-    """Fail naming ``path`` when it is missing or not a regular file."""
-    if path.is_file():
+    """Fail naming ``path`` when it is missing or not a regular file (a folder, a device, a
+    FIFO: it is not opened, so a FIFO cannot block the reader)."""
+    kind = kind_of(path)
+    if kind == "a regular file":
         return
-    if path.is_dir():
-        raise InputError(f"{path}: {what} expected, but this is a folder")
-    if path.exists():
-        raise InputError(f"{path}: {what} expected, but this is not a regular file")
+    if kind is not None:
+        raise InputError(f"{path}: {what} expected, but this is {kind}")
     raise InputError(not_found(path, what))
+
+
+def _require_size(path: Path, limit: int, what: str) -> int:
+    """The size of the regular file ``path`` in bytes; an :class:`InputError` when it is above
+    ``limit`` (one of the limits at the top of this module), before anything is read."""
+    size = path.stat().st_size
+    if size > limit:
+        raise InputError(f"{path}: {size:,} bytes, more than the {_mib(limit)} a {what} may "
+                         "hold")
+    return size
+
+
+def _mib(nbytes: int) -> str:
+    """A size limit in words: ``8 MiB``, ``2 GiB``."""
+    return f"{nbytes / 2**30:g} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:g} MiB"
 
 
 @contextlib.contextmanager
@@ -856,6 +956,48 @@ def _decoder_note(texts: list[str]) -> str:
     return f": {last[:160]}" if last else ""
 
 
+_PNG = b"\x89PNG\r\n\x1a\n"
+#: JPEG start-of-frame markers (baseline, progressive, lossless, arithmetic): they hold the size.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def image_header_size(fh) -> tuple[int, int] | None:
+    """``(width, height)`` in pixels from the header of the PNG or JPEG data in the binary
+    file object ``fh`` (read from its current position), without decoding; None for other
+    formats or a header this cannot read (the decoder then judges the data)."""
+    start = fh.tell()
+    head = fh.read(24)
+    if head[:8] == _PNG and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    if head[:3] != b"\xff\xd8\xff":
+        return None
+    pos = start + 2
+    for _ in range(1024):               # the segments before the frame header (APPn, DQT, ...)
+        fh.seek(pos)
+        seg = fh.read(9)
+        if len(seg) < 4 or seg[0] != 0xFF:
+            return None
+        marker = seg[1]
+        if marker == 0xFF or 0xD0 <= marker <= 0xD7 or marker == 0x01:
+            pos += 1 if marker == 0xFF else 2        # a fill byte, or a marker without length
+            continue
+        if marker in _JPEG_SOF:
+            h, w = int.from_bytes(seg[5:7], "big"), int.from_bytes(seg[7:9], "big")
+            return (w, h) if len(seg) == 9 and w and h else None
+        if marker in (0xD9, 0xDA):                  # end of image, or scan data: no frame size
+            return None
+        pos += 2 + int.from_bytes(seg[2:4], "big")
+    return None
+
+
+def check_image_size(where, size: tuple[int, int] | None) -> None:
+    """Refuse an image whose header (``size``: width, height from :func:`image_header_size`)
+    says more than :data:`MAX_IMAGE_PIXELS`, before it is decoded; ``where`` names it."""
+    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
+        raise InputError(f"{where}: the image header says {size[0]}x{size[1]} pixels, more than "
+                         f"the {MAX_IMAGE_PIXELS:,} an image may have")
+
+
 def decode_image(path: Path) -> np.ndarray:
     """The image at ``path`` as OpenCV decodes it (any depth and channel count).
 
@@ -865,7 +1007,11 @@ def decode_image(path: Path) -> np.ndarray:
     path = Path(path)
     _require_file(path, "image file")
     try:
-        raw = np.fromfile(path, dtype=np.uint8)
+        _require_size(path, MAX_IMAGE_BYTES, "image file")
+        with open(path, "rb") as fh:
+            check_image_size(path, image_header_size(fh))
+            fh.seek(0)
+            raw = np.fromfile(fh, dtype=np.uint8)
     except OSError as exc:
         raise InputError(f"{path}: cannot read the image ({exc.strerror or exc})") from None
     if raw.size == 0:
@@ -933,6 +1079,7 @@ def read_kitti_calib(path: Path) -> dict[str, np.ndarray]:
     _require_file(path, "calibration file")
     out: dict[str, np.ndarray] = {}
     try:
+        _require_size(path, MAX_TEXT_BYTES, _TEXT)
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file (not UTF-8); expected a KITTI calibration "
@@ -965,15 +1112,6 @@ def calib_matrix(calib: dict[str, np.ndarray], key: str, shape: tuple[int, int],
     return m
 
 
-#: Most values (scalars, lists and mappings) a YAML file may hold once its aliases are expanded.
-#: A value costs at most about 100 bytes as a Python object (8 as a number in numpy), so one
-#: file can make the readers build at most about 100 MB; the files paretocal reads (calib.yaml,
-#: camera_info, --config, --init) hold a few hundred values. Aliases themselves are allowed:
-#: only their expansion is bounded ("billion laughs": nine nested anchors of nine aliases each
-#: are 340 bytes of text and 387 million values, which numpy turns into 2.9 GB).
-MAX_YAML_VALUES = 1_000_000
-
-
 class _AliasBomb(Exception):
     """A YAML document whose aliases expand beyond :data:`MAX_YAML_VALUES`, or refer to
     themselves."""
@@ -1003,25 +1141,89 @@ def _expanded_size(node, sizes: dict, open_: set) -> int:
     return n
 
 
-def load_yaml(text: str, path: Path | str):
-    """``yaml.safe_load`` of ``text`` that refuses alias bombs quickly, naming ``path``.
+class _DuplicateKey(Exception):
+    """A mapping that holds a key twice: ``key``, and the lines (1-based) of both, or None."""
 
-    A document whose anchors and aliases expand beyond :data:`MAX_YAML_VALUES` values (or
-    refer to themselves) raises :class:`InputError` before anything is built from it; YAML
-    syntax errors propagate as :class:`yaml.YAMLError` for the caller to word.
+    def __init__(self, key, lines=None):
+        super().__init__(key)
+        self.key, self.lines = key, lines
+
+    def error(self, path) -> InputError:
+        shown = quote(self.key) if is_name(self.key) else "a key that is not a plain name"
+        a, b = self.lines or (None, None)
+        where = "" if a is None else f" (line {a})" if a == b else f" (lines {a} and {b})"
+        return InputError(f"{path}: {shown} is given twice in one mapping{where}; a key may "
+                          "appear once (the second would silently replace the first)")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a mapping holding a key twice, at any depth (PyYAML
+    keeps the last one silently). Keys brought in by a merge (``<<: *anchor``) may be
+    overridden: that is what a merge is for."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            try:
+                if key in seen:
+                    raise _DuplicateKey(key, (seen[key], line))
+                seen[key] = line
+            except TypeError:
+                continue                                # unhashable: the constructor says so
+        return super().construct_mapping(node, deep)
+
+
+def _unique_pairs(pairs: list) -> dict:
+    """``object_pairs_hook`` of :func:`json.loads` that refuses a key given twice."""
+    seen = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise _DuplicateKey(key)
+        seen.add(key)
+    return dict(pairs)
+
+
+def load_yaml(text: str, path: Path | str):
+    """``yaml.safe_load`` of ``text`` that refuses what would be read wrongly or slowly,
+    naming ``path``.
+
+    :class:`InputError` is raised, before anything is built, for text longer than
+    :data:`MAX_TEXT_BYTES` or anchors and aliases that expand beyond :data:`MAX_YAML_VALUES`
+    values (or refer to themselves); and for a mapping that holds a key twice (at any depth).
+    YAML syntax errors propagate as :class:`yaml.YAMLError` (:func:`yaml_error` words them).
     """
-    loader = yaml.SafeLoader(text)
+    if len(text) > MAX_TEXT_BYTES:
+        raise InputError(f"{path}: {len(text):,} characters, more than the "
+                         f"{_mib(MAX_TEXT_BYTES)} a {_TEXT} may hold")
+    loader = _UniqueKeyLoader(text)
     try:
         node = loader.get_single_node()
         if node is None:
             return None
         try:
             _expanded_size(node, {}, set())
+            return loader.construct_document(node)
         except _AliasBomb as exc:
             raise InputError(f"{path}: {exc}") from None
-        return loader.construct_document(node)
+        except _DuplicateKey as exc:
+            raise exc.error(path) from None
     finally:
         loader.dispose()
+
+
+def yaml_error(path: Path | str, exc: yaml.YAMLError) -> InputError:
+    """The one-line error for a YAML syntax error in ``path``: the line and column and the
+    parser's words, never the lines of the file it quotes."""
+    if isinstance(exc, yaml.MarkedYAMLError):
+        mark = exc.problem_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        return InputError(f"{path}: not valid YAML "
+                          f"({where}{excerpt(exc.problem or exc.context or 'syntax error')})")
+    return InputError(f"{path}: not valid YAML ({first_line(exc)})")
 
 
 def read_mapping(path: Path) -> dict:
@@ -1029,6 +1231,7 @@ def read_mapping(path: Path) -> dict:
     path = Path(path)
     _require_file(path, "file")
     try:
+        _require_size(path, MAX_TEXT_BYTES, _TEXT)
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file (not UTF-8); expected YAML or JSON") from None
@@ -1036,14 +1239,14 @@ def read_mapping(path: Path) -> dict:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
     try:
-        data = json.loads(text) if kind == "JSON" else load_yaml(text, path)
+        data = (json.loads(text, object_pairs_hook=_unique_pairs) if kind == "JSON"
+                else load_yaml(text, path))
+    except _DuplicateKey as exc:
+        raise exc.error(path) from None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-        what = exc.problem or exc.context or "syntax error"
-        raise InputError(f"{path}: not valid YAML ({where}{what})") from None
+        raise yaml_error(path, exc) from None
     except (ValueError, yaml.YAMLError, RecursionError) as exc:
-        raise InputError(f"{path}: not valid {kind} ({_first_line(exc)})") from None
+        raise InputError(f"{path}: not valid {kind} ({first_line(exc)})") from None
     if not isinstance(data, dict):
         got = "an empty file" if data is None else f"a {type(data).__name__}"
         raise InputError(f"{path}: expected a mapping (key: value) at the top level, got {got}")

@@ -122,7 +122,8 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
     t0 = time.perf_counter()
     engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, lambda X: round_n(X, xl, xu),
                        settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
-    saved = checkpoint.load() if checkpoint is not None else None
+    saved = (checkpoint.load(settings.pop, settings.gens, xl, xu) if checkpoint is not None
+             else None)
     if saved is not None:
         state, history[:] = saved
         timed.evaluations = state.evaluations

@@ -43,6 +43,9 @@ from .single import single_objective
 
 STUDIES = ("pareto_front", "solution_space", "single_objective", "epsilon_constraint",
            "decision", "innovization", "robustness")
+#: Names a study folder holds (calibration/ is written first): the CLI refuses to write a study
+#: into a non-empty folder holding none of them unless told to (``--force``).
+STUDY_MARKS = ("calibration", "study.json", "report.html")
 
 
 @dataclass(frozen=True)
