@@ -31,6 +31,15 @@ constant-velocity prediction, adaptive threshold); only its poses are used, neve
 by the own registration at the pair's pose: the cluster-robust sandwich over 4 m blocks of
 correspondences (:class:`paretocal.motion.PairRegistration`).
 
+Measured (``benchmarks/egomotion.py``, 2 shared cores): the own registration is the default.
+On the KITTI drive its pair translations run smoothly from 0.236 to 0.196 m per 0.1 s while
+KISS-ICP's (1 m voxel, scan to map) jump between 0.100 and 0.280 m; over the ten 10-frame
+pairs the camera's direction of travel agrees with the own LiDAR odometry's within
+0.12-1.23 deg (median 0.68), with KISS-ICP's within 0.37-1.73 (median 0.74), and the relative
+rotations within 0.085 deg median against 0.134. On the aiMotive motorway both give 4.00-4.06 m
+per 0.133 s pair (README speed: 4.03 m) and lie 2.2 cm apart (median). KISS-ICP is 2-10 times
+faster per pair (0.16-0.43 s against 0.5-1.6 s); it stays an evaluator for the own poses.
+
 Standstill
 ----------
 A LiDAR pair is *standing* when its translation is not significantly different from zero under
@@ -39,7 +48,16 @@ its own covariance: ``t^T S^-1 t`` below the chi-square quantile with 3 degrees 
 removing its rotation is not above the matching noise: with pure noise and no translation the
 median de-rotated parallax is about 1.7 times the median epipolar residual (a 2-D Rayleigh median
 against a 1-D half-normal one), so ``min_parallax_ratio = 3`` asks for parallax clearly above it;
-or when fewer than ``min_inliers`` matches support the essential matrix.
+or when fewer than ``min_inliers`` matches support the essential matrix, or when the
+bootstrap spread of the direction exceeds ``max_direction_sigma_deg``. A pair without parallax
+still gives its rotation, from a robust rotation-only fit of the matched rays.
+
+The two tests answer different questions, and on PandaSet's "standing" frames 00-24 they
+differ: its clouds are motion-compensated with the dataset's own poses, so the LiDAR resolves
+the car's creep (0.3-6.5 cm per 0.2 s pair, with sub-millimetre standard deviations) and
+does not call those pairs standing, while the camera sees too little parallax in every one of
+them. A direction of travel is given only where both sensors give one
+(:func:`compare_motion`).
 """
 
 from __future__ import annotations
