@@ -55,9 +55,9 @@ still gives its rotation, from a robust rotation-only fit of the matched rays.
 The two tests answer different questions, and on PandaSet's "standing" frames 00-24 they
 differ: its clouds are motion-compensated with the dataset's own poses, so the LiDAR resolves
 the car's creep (0.3-6.5 cm per 0.2 s pair, with sub-millimetre standard deviations) and
-does not call those pairs standing, while the camera sees too little parallax in every one of
-them. A direction of travel is given only where both sensors give one
-(:func:`compare_motion`).
+does not call those pairs standing, while the camera resolves no direction in any of them
+(too little parallax, or a bootstrap spread of 15-43 deg). A direction of travel is given
+only where both sensors give one (:func:`compare_motion`).
 """
 
 from __future__ import annotations
