@@ -12,7 +12,7 @@ RANKS = {
     "geometry": 1, "camera": 1,
     "io": 2,
     "config": 3,
-    "features": 4, "motion": 4,
+    "features": 4, "motion": 4, "egomotion": 4,
     "objective": 5, "testing": 5,
     "search": 6, "quality": 6, "decide": 6,
     "inputs": 7, "stage": 7, "verdict": 7, "result": 7,

@@ -96,11 +96,13 @@ __all__ = [
     "Twist",
     "PoseTrajectory",
     "MotionEstimate",
+    "PairRegistration",
     "TimeOffsetEstimate",
     "deskew",
     "estimate_motion",
     "estimate_time_offset",
     "pair_residuals",
+    "register_pair",
     "sweep_centre",
 ]
 
@@ -417,7 +419,7 @@ def _solve_step(src: np.ndarray, tgt: _Target, T: np.ndarray, gate: float):
     Jw = J * w[:, None]
     H = Jw.T @ J
     g = Jw.T @ r
-    return H, g, r, w, sigma
+    return H, g, r, w, sigma, J, p
 
 
 def _register(src_levels: Sequence[np.ndarray], tgt_levels: Sequence[_Target], T0: np.ndarray,
@@ -459,7 +461,7 @@ def _register(src_levels: Sequence[np.ndarray], tgt_levels: Sequence[_Target], T
     step = _solve_step(src_levels[-1], tgt_levels[-1], T, gates[-1])
     if step is None:
         return None
-    H, _, r, w, sigma = step
+    H, _, r, w, sigma, *_ = step
     return _PairFit(T, H / sigma ** 2, sigma, int(len(r)), its)
 
 
@@ -525,6 +527,147 @@ def _conditioning(H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     share = info[:3] / tr if tr > 0 else np.zeros(3)
     vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
     return info, share, vals, vecs
+
+
+@dataclass
+class PairRegistration:
+    """One cloud registered onto another by :func:`register_pair`.
+
+    Attributes
+    ----------
+    T : ndarray, shape (4, 4)
+        ``T_target_source``: maps source coordinates into the target cloud's frame.
+    covariance : ndarray, shape (6, 6)
+        Covariance of the pose (translation first in m, then rotation in rad; left
+        perturbation, target frame) by the cluster-robust sandwich
+        ``H^-1 (sum_b g_b g_b^T) H^-1 B / (B - 1)`` over spatial blocks ``b`` of the
+        correspondences: residuals of one surface are correlated, which the plain inverse
+        Hessian ignores.
+    covariance_hessian : ndarray, shape (6, 6)
+        ``sigma^2 H^-1``, the inverse information with independent residuals (optimistic).
+    hessian : ndarray, shape (6, 6)
+        The information matrix ``H / sigma^2`` at the solution (1/m^2, 1/rad^2).
+    sigma : float
+        Robust residual scale (m).
+    inliers : int
+        Correspondences within the finest gate.
+    blocks : int
+        Spatial blocks the sandwich covariance summed over.
+    iterations : int
+        Gauss-Newton steps over all levels.
+    voxel : float
+        Voxel edge of the finest subsample (m).
+    """
+
+    T: np.ndarray
+    covariance: np.ndarray
+    covariance_hessian: np.ndarray
+    hessian: np.ndarray
+    sigma: float
+    inliers: int
+    blocks: int
+    iterations: int
+    voxel: float
+
+
+def _sandwich(J: np.ndarray, r: np.ndarray, w: np.ndarray, p: np.ndarray,
+              block: float) -> tuple[np.ndarray, int]:
+    """Cluster-robust covariance (6, 6) of a Gauss-Newton solution and the number of blocks:
+    correspondences grouped by cubes of edge ``block`` (m) around their positions ``p``."""
+    keys = np.floor(p / block).astype(np.int64)
+    _, lab = np.unique(keys, axis=0, return_inverse=True)
+    lab = lab.reshape(-1)
+    B = int(lab.max()) + 1 if len(lab) else 0
+    H = (J * w[:, None]).T @ J
+    G = np.zeros((B, 6))
+    np.add.at(G, lab, J * (w * r)[:, None])
+    try:
+        Hi = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.inf), B
+    meat = G.T @ G * (B / max(B - 1, 1))
+    return Hi @ meat @ Hi, B
+
+
+def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None = None, *,
+                  points: int = 15000, max_translation: float = 5.0,
+                  up: Sequence[float] = (0.0, 0.0, 1.0), k_normal: int = 12, block: float = 4.0,
+                  refine: bool = True,
+                  seed: int | np.random.Generator | None = 0) -> PairRegistration | None:
+    """Register one rigid cloud onto another (robust point-to-plane ICP, coarse to fine).
+
+    The same registration :func:`estimate_motion` runs on each consecutive pair, for clouds
+    that are already rigid (no per-point time, or de-skewed): the pose, its information and a
+    covariance that allows for correlated residuals.
+
+    Parameters
+    ----------
+    source, target : ndarray, shape (N, 3) and (M, 3)
+        Points in metres, each in its own frame.
+    T0 : ndarray, shape (4, 4), optional
+        Start for ``T_target_source``; without it a coarse search over translations within
+        ``max_translation`` (m) in the plane normal to ``up`` gives the start.
+    points : int
+        Points kept per cloud (a voxel subsample; coarser levels use 2x and 4x that voxel).
+    max_translation : float
+        Radius of the coarse search (m).
+    up : (3,) sequence
+        The clouds' up axis.
+    k_normal : int
+        Neighbours used for each target normal.
+    block : float
+        Edge (m) of the spatial blocks of the sandwich covariance: about the size of one
+        surface (a car, a wall segment), beyond which residuals are taken as independent.
+    refine : bool
+        Register (default); False only evaluates the information and covariance at ``T0``
+        (for a pose another method estimated).
+    seed : int, Generator or None
+        Randomness of the voxel subsampling.
+
+    Returns
+    -------
+    PairRegistration, or None when the registration failed (too few correspondences or a
+    singular system).
+    """
+    rng = np.random.default_rng(seed)
+    src = np.asarray(source, dtype=np.float64)
+    tgt = np.asarray(target, dtype=np.float64)
+    for name, a in (("source", src), ("target", tgt)):
+        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 10:
+            raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {a.shape}")
+    up = np.asarray(up, dtype=np.float64)
+    up = up / np.linalg.norm(up)
+    vs, ls = _prepare_levels(src, points, rng)
+    vt, lt = _prepare_levels(tgt, points, rng)
+    v = 0.5 * (vs + vt)
+    gates = [12.0 * v, 6.0 * v, 3.0 * v]
+    targets = [_target(tgt[i], _neighbours(tgt[i], k_normal)) for i in lt]
+    sources = [src[i] for i in ls]
+    if T0 is None:
+        if not refine:
+            raise ValueError("register_pair: refine=False needs T0")
+        T0 = _coarse_translation(sources[0], targets[0], np.eye(4), max_translation, 4.0 * v, up)
+    T = np.asarray(T0, dtype=np.float64)
+    its = 0
+    if refine:
+        scale = float(np.median(np.linalg.norm(src[ls[-1]], axis=1)))
+        fit = _register(sources, targets, T, gates, scale)
+        if fit is None:
+            return None
+        T, its = fit.T, fit.iterations
+    step = _solve_step(sources[-1], targets[-1], T, gates[-1])
+    if step is None:
+        return None
+    H, _, r, w, sigma, J, p = step
+    cov, B = _sandwich(J, r, w, p, block)
+    info = H / sigma ** 2
+    try:
+        cov_h = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        cov_h = np.full((6, 6), np.inf)
+    return PairRegistration(T=T, covariance=cov, covariance_hessian=cov_h, hessian=info,
+                            sigma=float(sigma), inliers=int(len(r)), blocks=B, iterations=its,
+                            voxel=float(v))
 
 
 # ----------------------------------------------------------------------------- estimation
