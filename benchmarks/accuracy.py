@@ -102,7 +102,10 @@ DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
 DATE = DATA / "kitti_raw" / "2011_09_26"
 OBJECT = DATA / "kitti_object" / "training"
-AXES = ("yaw_deg", "pitch_deg", "roll_deg", "x_cm", "y_cm", "z_cm")
+#: Per-axis errors (paretocal.geometry.pose_error): the correction's axes (translation in the
+#: LiDAR frame, those of the verdict's intervals), then the translation in the camera frame.
+AXES = ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg", "pitch_deg", "roll_deg",
+        "x_cam_cm", "y_cam_cm", "z_cam_cm")
 #: A result is "off" beyond either limit (the verdict's honesty figures).
 OFF_DEG, OFF_CM = 1.0, 10.0
 
@@ -497,7 +500,7 @@ def _run_api(args, ds: Dataset, view: Path, T_init: np.ndarray) -> dict:
         return {"exit": 2, "error": str(exc)}
     rel = r.reliability or {}
     return {"T": r.T_cam_lidar, "n": int(r.n_points), "verdict": rel.get("verdict"),
-            "reasons": list(rel.get("reasons") or [])}
+            "reasons": list(rel.get("reasons") or []), "reliability": rel}
 
 
 def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
@@ -516,7 +519,8 @@ def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
     doc = json.loads((run / "result.json").read_text())
     rel = doc.get("reliability") or {}
     return {"T": np.array(doc["T_cam_lidar"]), "n": int(doc["n_points"]),
-            "verdict": rel.get("verdict"), "reasons": list(rel.get("reasons") or [])}
+            "verdict": rel.get("verdict"), "reasons": list(rel.get("reasons") or []),
+            "reliability": rel}
 
 
 def run_trial(k: int, args, ds: Dataset, work: Path, view: Path | None = None) -> dict:
@@ -538,12 +542,86 @@ def run_trial(k: int, args, ds: Dataset, work: Path, view: Path | None = None) -
     row.update({"rot_deg": float(e["rotation_deg"]), "trans_cm": float(e["translation_cm"]),
                 "n": out["n"], "verdict": out["verdict"], "reasons": out["reasons"]})
     row.update({a: float(e[a]) for a in AXES})
+    row.update(interval_record(out.get("reliability") or {}, out["T"], T_ref))
     if ds.sensor_pose is not None:
         P = ds.sensor_pose
         row["sensor_cm"] = float(pose_error(out["T"] @ P, T_ref @ P)["translation_cm"])
         row["start_sensor_cm"] = float(pose_error(T_init @ P, T_ref @ P)["translation_cm"])
     row["T_cam_lidar"] = _rows(out["T"])
     return row
+
+
+def interval_record(rel: dict, T: np.ndarray, T_ref: np.ndarray) -> dict:
+    """A trial's 95 % intervals and what they claim to hold: ``interval_error`` per axis
+    (cm, deg), the correction ``d`` with ``T_ref = T @ D(d)`` (docs/conventions.md section 1);
+    ``half_width`` (None per undetermined axis) for a result judged ok, ``half_width_not_trusted``
+    for an unreliable one; and what they were built from (``interval_parts``)."""
+    from paretocal.geometry import correction_params
+    from paretocal.quality import AXES as IV_AXES, TO_REPORT
+
+    d = correction_params(invert(np.asarray(T)) @ np.asarray(T_ref)) * TO_REPORT
+    iv = rel.get("intervals")
+    untrusted = rel.get("intervals_not_trusted")
+    parts = iv or untrusted or {}
+    return {"interval_error": {a: float(v) for a, v in zip(IV_AXES, d)},
+            "half_width": (iv or {}).get("half_width"),
+            "half_width_not_trusted": (untrusted or {}).get("half_width"),
+            "interval_parts": {k: parts.get(k) for k in ("alignment_px", "per_px",
+                                                          "jackknife_se")}}
+
+
+def interval_figures(rows: list[dict], key: str = "half_width") -> dict | None:
+    """How the intervals ``key`` of ``rows`` held, per axis and over all axis-trials (the
+    undetermined axes left out): ``coverage`` (share with |error| <= half-width), the median
+    of half-width / |error| and the median half-width over the 95th percentile of |error|."""
+    from paretocal.quality import AXES as IV_AXES
+
+    have = [r for r in rows if r.get(key)]
+    if not have:
+        return None
+    out = {"trials": len(have), "axes": {}}
+    hits = total = 0
+    ratios = []
+    for a in IV_AXES:
+        pairs = [(abs(r["interval_error"][a]), r[key][a]) for r in have
+                 if r[key].get(a) is not None]
+        if not pairs:
+            out["axes"][a] = {"determined": 0}
+            continue
+        err, half = np.array(pairs).T
+        ok = int(np.sum(err <= half))
+        hits, total = hits + ok, total + len(err)
+        ratio = half / np.maximum(err, 1e-9)
+        ratios += list(ratio)
+        out["axes"][a] = {"determined": int(len(err)), "covered": ok,
+                          "median_half_width": float(np.median(half)),
+                          "p95_error": float(np.percentile(err, 95)),
+                          "median_ratio": float(np.median(ratio)),
+                          "median_half_width_over_p95_error":
+                              float(np.median(half) / max(np.percentile(err, 95), 1e-9))}
+    out["axis_trials"] = total
+    out["coverage"] = hits / total if total else None
+    out["median_ratio"] = float(np.median(ratios)) if ratios else None
+    return out
+
+
+def _interval_lines(fig: dict | None, what: str) -> list[str]:
+    if fig is None:
+        return [f"  {what}: none"]
+    ax = fig["axes"]
+    det = {a: v for a, v in ax.items() if v["determined"]}
+    cov = (f"{100 * fig['coverage']:.0f} % of {fig['axis_trials']} axis-trials"
+           if fig["axis_trials"] else "no axis determined")
+    lines = [f"  {what} ({fig['trials']} results): |error| within the half-width on {cov} ("
+             + ", ".join(f"{a} {v['covered']}/{v['determined']}" for a, v in det.items()) + ")"]
+    if det:
+        lines.append("    median half-width / |error|: " + ", ".join(
+            f"{a} {v['median_ratio']:.2g}" for a, v in det.items())
+            + f"; all axes {fig['median_ratio']:.2g}")
+        lines.append("    median half-width / p95 |error|: " + ", ".join(
+            f"{a} {v['median_half_width']:.3g}/{v['p95_error']:.3g} = "
+            f"{v['median_half_width_over_p95_error']:.2g}" for a, v in det.items()))
+    return lines
 
 
 # --- summary --------------------------------------------------------------------------------
@@ -583,6 +661,8 @@ def summary_figures(rows: list[dict]) -> dict:
         "no_verdict": sum(r["verdict"] not in ("ok", "unreliable") for r in done),
         "reasons": _reason_counts(done),
     }
+    s["intervals"] = interval_figures(done)
+    s["intervals_not_trusted"] = interval_figures(done, "half_width_not_trusted")
     return s
 
 
@@ -646,6 +726,10 @@ def summarise(rows: list[dict], args, ds: Dataset | None = None) -> str:
                                           if v["no_verdict"] else ""))
     for reason, count in v["reasons"].items():
         lines.append(f"    reason x{count}: {reason}")
+    lines += _interval_lines(s["intervals"], "95 % intervals, results judged ok")
+    if s["intervals_not_trusted"] is not None:
+        lines += _interval_lines(s["intervals_not_trusted"],
+                                 "intervals not trusted, results judged unreliable")
     if s["wall_s"]:
         lines.append(f"  wall time per calibration (s): median {s['wall_s']['median']:.0f}, "
                      f"max {s['wall_s']['max']:.0f}")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import signal
 from pathlib import Path
 
 import cv2
@@ -77,15 +79,34 @@ def run_cli(capfd, *args):
     return code, out, err
 
 
+#: A progress line of a command whose stderr is not a terminal: the time since it started,
+#: then the stage (paretocal.cli._Progress).
+PROGRESS_LINE = re.compile(r"^paretocal: +\d+\.\d s  \S")
+
+
+def without_progress(err: str) -> list[str]:
+    """The lines of ``err`` after the progress lines, which must all come first."""
+    lines = err.strip().splitlines()
+    progress = [bool(PROGRESS_LINE.match(line)) for line in lines]
+    assert progress == sorted(progress, reverse=True), err        # progress lines first
+    return [line for line, p in zip(lines, progress) if not p]
+
+
 def bad_cli(capfd, *args, expect: str | tuple[str, ...]) -> str:
-    """Run the CLI; assert exit 2 and exactly one line on stderr holding every ``expect``
-    (and no traceback); returns the line."""
+    """Run the CLI; assert exit 2 and exactly one line on stderr (after any progress lines)
+    holding every ``expect`` (and no traceback); returns the line."""
     code, out, err = run_cli(capfd, *args)
     assert code == 2, (code, out, err)
-    lines = err.strip().splitlines()
+    lines = without_progress(err)
     assert len(lines) == 1 and lines[0].startswith("paretocal: error: "), err
     for e in (expect,) if isinstance(expect, str) else expect:
         assert e in lines[0], lines[0]
     assert "Traceback" not in err
     return lines[0]
 
+
+def default_sigint() -> None:
+    """``preexec_fn`` for a child process a test sends SIGINT: a test session started in the
+    background (``nohup``, ``&`` in a script) has SIGINT ignored, children inherit that and
+    paretocal rightly keeps it; the child starts with the default action, as from a terminal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

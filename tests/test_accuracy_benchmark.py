@@ -221,3 +221,39 @@ def test_summary_counts_the_verdicts(acc):
     args = acc.parse_args([])
     text = acc.summarise(rows, args)
     assert "2 result(s) off" in text and "within 1.0 deg and 10 cm: 2/5" in text
+
+
+def test_interval_coverage_and_width_ratios(acc):
+    """The summary's interval figures: results judged ok only, undetermined axes left out."""
+    def row(k, verdict, err, half):
+        key = "half_width" if verdict == "ok" else "half_width_not_trusted"
+        return {"dataset": "d", "trial": k, "start_deg": 5.0, "start_cm": 20.0, "rot_deg": 0.2,
+                "trans_cm": 2.0, "n": 100, "verdict": verdict, "reasons": [], "wall_s": 1.0,
+                **{a: 0.0 for a in acc.AXES},
+                "interval_error": dict(zip(("x", "y", "z", "yaw", "pitch", "roll"), err)),
+                key: dict(zip(("x", "y", "z", "yaw", "pitch", "roll"), half))}
+
+    half = [2.0, 2.0, 2.0, 0.2, 0.2, None]                   # roll undetermined
+    rows = [row(0, "ok", [1.0, -1.0, 0.5, 0.1, 0.1, 3.0], half),
+            row(1, "ok", [3.0, 0.5, -0.5, -0.05, 0.4, 0.0], half),
+            row(2, "unreliable", [30.0, 0, 0, 0, 0, 0], [9.0] * 6)]
+    s = acc.summary_figures(rows)
+    iv = s["intervals"]
+    assert iv["trials"] == 2 and iv["axis_trials"] == 10
+    assert iv["coverage"] == pytest.approx(8 / 10)                # x of trial 1, pitch of 1
+    assert iv["axes"]["roll"] == {"determined": 0}
+    assert iv["axes"]["x"]["covered"] == 1 and iv["axes"]["x"]["median_ratio"] == pytest.approx(
+        np.median([2.0, 2.0 / 3.0]))
+    assert iv["axes"]["yaw"]["median_half_width_over_p95_error"] == pytest.approx(
+        0.2 / np.percentile([0.1, 0.05], 95))
+    assert s["intervals_not_trusted"]["coverage"] == pytest.approx(5 / 6)
+    text = acc.summarise(rows, acc.parse_args([]))
+    assert "95 % intervals, results judged ok (2 results): |error| within the half-width on " \
+           "80 % of 10 axis-trials (x 1/2" in text
+    # The error on the intervals' axes is the correction from the result to the reference.
+    T_ref = correction_matrix([0.1, 0.2, 0.3, 10, 20, 30])
+    T = T_ref @ np.linalg.inv(correction_matrix([0.01, 0, 0, 0, 0, 0.5]))
+    rec = acc.interval_record({"verdict": "ok", "intervals": {"half_width": {"x": 1.0}}},
+                              T, T_ref)
+    assert rec["interval_error"]["x"] == pytest.approx(1.0) and rec["half_width"] == {"x": 1.0}
+    assert rec["interval_error"]["roll"] == pytest.approx(0.5)

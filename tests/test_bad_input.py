@@ -35,7 +35,7 @@ from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
-from .helpers import bad_cli as bad, run_cli as run, write_generic
+from .helpers import bad_cli as bad, default_sigint, run_cli as run, write_generic
 
 FAST = ["--pop", "16", "--gens", "3", "--no-polish", "--frames", "0:2", "--no-figures",
         "--checkpoint-every", "0"]
@@ -649,6 +649,7 @@ def test_a_normal_short_run_is_ok(tmp_path, rig3, perturbed_init):
     assert set(rel) >= {"verdict", "reasons", "frames", "in_view", "at_bound"}
     assert rel["frames"] == 3 and 0 < rel["in_view"] <= 1
     assert rel["verdict"] == "ok", rel["reasons"]
+    assert rel["intervals"]["frame"] == "lidar" and rel["intervals_not_trusted"] is None
     assert doc["reference_error"]["rotation_deg"] < 1.0      # and it is indeed close
 
 
@@ -719,6 +720,14 @@ def _fake_result(**over):
     ({"evidence": {"contrast": {"frames_clear": 1.0, "z": 2.4}}},
      "images and clouds barely agree: the result fits the image edges only 2.4 spreads better"),
     ({"evidence": {"contrast": {"frames_clear": 0.95, "z": 5.0}}}, None),
+    # The jackknife of the intervals (at the local optimum) decides when there is one.
+    ({"quality": {"jackknife_se": {"x": 0.1, "y": 0.1, "z": 13.6, "yaw": 0.1, "pitch": 0.1,
+                                   "roll": 0.1}},
+      "evidence": {"intervals": {"units": {"x": "cm", "z": "cm", "roll": "deg"},
+                                 "jackknife_se": {"x": 0.3, "z": 0.7, "roll": None}}}}, None),
+    ({"evidence": {"intervals": {"units": {"x": "cm", "z": "cm"},
+                                 "jackknife_se": {"x": 0.3, "z": 11.0}}}},
+     "the frames disagree: jackknife standard error z 11 cm"),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.verdict import reliability
@@ -730,6 +739,21 @@ def test_reliability_reasons(over, reason):
         assert rel["verdict"] == "unreliable" and len(rel["reasons"]) == 1, rel
         assert reason in rel["reasons"][0], rel["reasons"]
     json.dumps(rel, allow_nan=False)                     # plain JSON
+
+
+@pytest.mark.parametrize("over, ok", [({}, True), ({"frames": ["a", "b"]}, False)])
+def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
+    """An unreliable result's intervals are not what they claim (a wrong basin, frames that
+    disagree): result.json keeps them under ``intervals_not_trusted`` and the console says
+    none."""
+    from paretocal.verdict import interval_text, reliability
+
+    iv = {"frame": "lidar", "units": {"x": "cm"}, "half_width": {"x": 1.5}, "undetermined": []}
+    rel = reliability(_fake_result(evidence={"intervals": iv}, **over))
+    assert rel["verdict"] == ("ok" if ok else "unreliable")
+    assert rel["intervals"] == (iv if ok else None)
+    assert rel["intervals_not_trusted"] == (None if ok else iv)
+    assert interval_text(rel) == ("x +-1.5 cm" if ok else None)
 
 
 # --- a very large cloud ---------------------------------------------------------------------------
@@ -926,6 +950,17 @@ def test_a_dangling_link_in_the_source_is_named(capfd, tmp_path, rig, raw_frames
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,
         expect=(f"{path}: point cloud file not reachable: a symbolic link to "
                 f"{tmp_path / 'moved.bin'}, which does not exist"))
+
+
+# --- results and commands ---------------------------------------------------------------------
+
+def test_check_without_an_extrinsic_on_a_dataset_without_one(capfd, tmp_path, raw_frames):
+    """``check`` takes the dataset's own extrinsic by default; a folder whose calib.yaml has
+    none exits 2 saying to pass --extrinsic, before any feature is computed."""
+    folder = write_generic(tmp_path / "noT", raw_frames[:1], with_T=False)
+    bad(capfd, "check", folder,
+        expect=(f"{folder}: the dataset has no extrinsic of its own (T_cam_lidar in "
+                "calib.yaml); pass --extrinsic FILE"))
 
 
 # --- sizes, excerpts and start-up -------------------------------------------------------------
@@ -1321,7 +1356,7 @@ def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, d
     start = (["-m", "paretocal"] if how == "-m"
              else ["-c", "from paretocal.__main__ import console; console()"])
     proc = subprocess.Popen([sys.executable, *start, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                            stderr=subprocess.STDOUT, text=True, preexec_fn=default_sigint)
     term = 1 << (signal.SIGTERM - 1)
     deadline = time.monotonic() + 60
     while not _caught(proc.pid) & term and proc.poll() is None and time.monotonic() < deadline:

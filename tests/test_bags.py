@@ -20,7 +20,7 @@ from paretocal.io import load_frames, read_extrinsic, write_extrinsic
 from paretocal.io.bags import (camera_from_info, cloud_array, compressed_image, image_array,
                                pair_by_stamp)
 
-from .helpers import bad_cli as bad, run_cli as run
+from .helpers import bad_cli as bad, run_cli as run, without_progress
 
 if (os.environ.get("PARETOCAL_REQUIRE_OPTIONAL") == "1"
         and importlib.util.find_spec("rosbags") is None):
@@ -491,6 +491,20 @@ def test_every_limit_and_dropped_messages_are_reported(tmp_path, capfd, frames):
     assert "3 skipped by --every/--limit; dropped 1 images and 2 clouds" in stdout
 
 
+@needs_rosbags
+def test_without_topics_the_bags_only_image_and_cloud_topics_are_used(tmp_path, capfd, frames):
+    """A bag with one (compressed) image topic and one PointCloud2 topic needs neither option:
+    extract says which it used and writes the frames."""
+    bag = rig_bag(tmp_path, "mcap", frames, "png")
+    out = tmp_path / "frames"
+    code, stdout, err = run(capfd, "extract", bag, "--out", out)
+    assert code == 0, err
+    assert ("paretocal: using --image-topic /camera/image and --cloud-topic /lidar/points "
+            "(the bag's only topics of those kinds)") in stdout
+    report = json.loads((out / "extract.json").read_text())
+    assert report["topics"]["image"] == "/camera/image" and report["counts"]["pairs_kept"] == 3
+
+
 # --- bad bags ------------------------------------------------------------------------------------
 
 
@@ -524,6 +538,25 @@ class TestBadBags:
             "--cloud-topic", "/img",
             expect="topic '/img' (--cloud-topic) holds sensor_msgs/msg/Image, not "
                    "sensor_msgs/msg/PointCloud2")
+        assert not (tmp_path / "o").exists()
+
+    def test_without_topics_the_topics_are_listed(self, tmp_path, capfd, small_bag):
+        """Two image topics: extract cannot choose; it lists every topic with its type and
+        message count on stdout, and says on one line which options to pass, with the
+        candidates; nothing is written."""
+        code, stdout, err = run(capfd, "extract", small_bag, "--out", tmp_path / "o")
+        assert code == 2, err
+        listing = stdout.strip().splitlines()
+        assert listing[0] == f"paretocal: the topics of {small_bag}:"
+        rows = [line.split() for line in listing[1:]]
+        assert rows == [["image", "/depth", "sensor_msgs/msg/Image", "1", "message"],
+                        ["image", "/img", "sensor_msgs/msg/Image", "1", "message"],
+                        ["point", "cloud", "/pts", "sensor_msgs/msg/PointCloud2", "2", "messages"],
+                        ["camera", "info", "/info", "sensor_msgs/msg/CameraInfo", "1", "message"]]
+        (line,) = without_progress(err)
+        assert line == (f"paretocal: error: {small_bag}: which topics to extract? pass "
+                        "--image-topic TOPIC (image topics: /depth, /img); camera info topics: "
+                        "/info; the bag's topics are listed on stdout")
         assert not (tmp_path / "o").exists()
 
     def test_no_pairs_within_the_tolerance_gives_the_nearest(self, tmp_path, capfd, small_bag):
@@ -583,8 +616,10 @@ class TestBadBags:
                          "height: 375}\n")
         bad(capfd, *_extract(small_bag, out, "--calib", calib, "--camera-info-topic", "/info"),
             expect="give either --camera-info-topic or --calib (with its camera), not both")
-        bad(capfd, "extract", small_bag, "--out", out, "--cloud-topic", "/pts",
-            expect="Missing option '--image-topic'")
+        line = bad(capfd, "extract", small_bag, "--out", out, "--cloud-topic", "/pts",
+                   expect=(f"{small_bag}: which topics to extract? pass --image-topic TOPIC "
+                           "(image topics: /depth, /img); camera info topics: /info"))
+        assert "--cloud-topic" not in line
         assert not out.exists()
 
     def test_an_interrupt_leaves_no_folder(self, tmp_path, capfd, small_bag, monkeypatch):
@@ -596,8 +631,8 @@ class TestBadBags:
         monkeypatch.setattr(paretocal.extract, "cloud_array", stop)   # after the image is written
         code, _, err = run(capfd, *_extract(small_bag, tmp_path / "o", "--max-dt", "0.2"))
         assert code == 130
-        assert err.strip() == ("paretocal: interrupted; nothing was written to --out (the partial "
-                               "extraction was removed); run the same command again")
+        assert without_progress(err) == ["paretocal: interrupted; nothing was written to --out (the partial "
+                                          "extraction was removed); run the same command again"]
         assert sorted(p.name for p in tmp_path.iterdir()) == ["s.bag"]
 
     def test_calibrate_a_bag_says_to_extract_it_first(self, tmp_path, capfd, small_bag):

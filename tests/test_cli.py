@@ -10,10 +10,11 @@ import pytest
 import yaml
 
 from paretocal.cli import main
-from paretocal.geometry import pose_error
+from paretocal.geometry import correction_params, invert, pose_error
 from paretocal.io import read_extrinsic
+from paretocal.quality import TO_REPORT
 
-from .helpers import write_generic
+from .helpers import PROGRESS_LINE, write_generic
 
 FAST = ["--pop", "16", "--gens", "3", "--frames", "0:2", "--no-polish"]
 
@@ -40,6 +41,17 @@ class TestCalibrate:
                                  "--pop", "16", "--gens", "3", "--frames", "0:2", "--seed", "1")
         assert code == 0, err
         assert "chosen n =" in stdout and "error vs reference" in stdout
+        # stderr is not a terminal here: one line per stage as it begins, with the time since
+        # the start; no bars.
+        stages = [line.split(" s  ", 1) for line in err.splitlines() if PROGRESS_LINE.match(line)]
+        assert [text for _, text in stages] == [
+            "loading the frames", "locating the LiDAR", "recovering the LiDAR rings",
+            "compensating the motion", "extracting features (2 frames)", "scoring the seed grid",
+            "searching (3 NSGA-II generations)", "polishing the front", "choosing the solution",
+            "gathering the verdict's evidence", "writing the results"], err
+        times = [float(t.split()[-1]) for t, _ in stages]
+        assert times == sorted(times)
+        assert "\x1b" not in err                                # no terminal control codes
         for name in ("result.json", "pareto.csv", "extrinsic.yaml", "pareto.png",
                      "overlay_before.png", "overlay_after.png", "overlay_reference.png"):
             assert (out / name).stat().st_size > 0, name
@@ -53,12 +65,32 @@ class TestCalibrate:
         e1 = pose_error(np.array(doc["T_cam_lidar"]), ref)
         assert doc["reference_error"]["translation_cm"] == pytest.approx(
             float(e1["translation_cm"]))
+        # Every x, y, z says its frame: the per-axis errors in the LiDAR frame (the
+        # correction's and the intervals' axes) are the correction from the reference to the
+        # result; the camera frame's are named so.
+        err_ref = doc["reference_error"]
+        lidar = [err_ref[k] for k in ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg",
+                                      "pitch_deg", "roll_deg")]
+        np.testing.assert_allclose(
+            lidar, correction_params(invert(ref) @ np.array(doc["T_cam_lidar"])) * TO_REPORT,
+            atol=1e-9)
+        assert {"x_cam_cm", "y_cam_cm", "z_cam_cm"} <= set(err_ref) and "x_cm" not in err_ref
+        assert doc["correction_frame"] == doc["quality"]["frame"] == "lidar"
+        line = next(x for x in stdout.splitlines() if "per axis (LiDAR frame)" in x)
+        assert line.startswith("paretocal: error vs reference per axis (LiDAR frame): x ")
+        assert f"z {err_ref['z_lidar_cm']:+.3g} cm" in line and line.endswith(" deg")
+        # Two frames: judged unreliable, so no intervals on the console or in result.json
+        # (they are kept under a name that says so).
+        assert doc["reliability"]["verdict"] == "unreliable"
+        assert "95 % intervals" not in stdout and doc["reliability"]["intervals"] is None
+        assert doc["reliability"]["intervals_not_trusted"]["frame"] == "lidar"
         T = read_extrinsic(out / "extrinsic.yaml")
         np.testing.assert_allclose(T, doc["T_cam_lidar"], atol=1e-8)
         rows = (out / "pareto.csv").read_text().splitlines()
         header = rows[0].split(",")
         for col in ("x", "y", "z", "yaw", "pitch", "roll", "n", "chamfer", "cost", "ms", "bytes",
-                    "ref_rotation_deg", "ref_translation_cm", "chosen"):
+                    "ref_rotation_deg", "ref_translation_cm", "ref_x_lidar_cm", "ref_x_cam_cm",
+                    "chosen"):
             assert col in header
         assert sum(r.endswith(",1") for r in rows[1:]) == 1
         assert not list(out.glob(".*tmp*"))                     # no temporary files left
@@ -79,9 +111,9 @@ class TestCalibrate:
     def test_strict_exits_3_on_an_unreliable_result(self, tmp_path, raw_date, init_file,
                                                     capsys):
         out = tmp_path / "s"
-        code, stdout, _ = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out", out,
-                               *FAST, "--no-figures", "--strict")
-        assert code == 3
+        code, stdout, err = _run(capsys, "calibrate", raw_date, "--init", init_file, "--out",
+                                 out, *FAST, "--no-figures", "--strict", "--quiet")
+        assert code == 3 and err == ""                           # --quiet: no progress lines
         assert "verdict UNRELIABLE" in stdout.strip().splitlines()[-1]
         doc = json.loads((out / "result.json").read_text())   # written all the same
         assert doc["reliability"]["verdict"] == "unreliable"
@@ -194,10 +226,43 @@ class TestCheck:
         # Two frames: the check says it is weak, in the JSON and on the last line.
         assert doc["weak"] and "only 2 frame(s)" in doc["notes"][0]
         assert stdout.strip().splitlines()[-1].startswith("paretocal: WEAK CHECK: only 2 frame")
+        # What was compared: the features per frame as in the report, and the rings.
+        mean = doc["features"]["per_frame_mean"]
+        line = stdout.splitlines()[1]
+        assert line.startswith(f"paretocal: features per frame: {mean['depth_edge']:g} depth "
+                               f"edges, {mean['intensity_edge']:g} intensity edges, "), line
+        assert "64 rings" in line and "2 of 2 frames contribute" in line
+        assert "noise" not in line
+
+    def test_without_extrinsic_the_datasets_own_is_checked(self, tmp_path, raw_date, capsys):
+        from paretocal.io import detect_source
+
+        out = tmp_path / "check.json"
+        code, stdout, err = _run(capsys, "check", raw_date, "--frames", "0:2", "--out", out,
+                                 "--quiet")
+        assert code == 0, err
+        doc = json.loads(out.read_text())
+        assert doc["extrinsic_from"] == "dataset"
+        np.testing.assert_array_equal(doc["T_checked"], detect_source(raw_date).frames[0].T_ref)
+        assert stdout.startswith("paretocal: the dataset's own extrinsic: ")
 
     def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
         code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")
         assert code == 2 and "none.yaml: file not found" in err
+
+
+def test_the_features_line_names_frames_whose_depth_edges_look_like_noise():
+    from paretocal.cli import _features_line
+
+    features = {"per_frame_mean": {"depth_edge": 812.5, "intensity_edge": 90.0, "smooth": 1000.0},
+                "rings": [2, 64], "ring_recovery": {"methods": ["lines"], "min_purity": 0.0},
+                "frames_contributing": 2, "per_frame": [{}, {}],
+                "noise": [{"frame": "000028", "reason": "2 laser rings found (a spinning LiDAR "
+                                                        "has at least 8)"}]}
+    line = _features_line(features)
+    assert "2/64 rings (lines, purity >= 0.00)" in line
+    assert line.endswith("the depth edges of 1 frame(s) look like noise (frame 000028: 2 laser "
+                         "rings found (a spinning LiDAR has at least 8))")
 
 
 def test_verdict_line_names_the_main_reason_and_counts_the_rest():

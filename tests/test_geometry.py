@@ -55,7 +55,23 @@ class TestPoseError:
         assert e["rotation_deg"] == pytest.approx(1.5, abs=1e-9)
         assert e["roll_deg"] == pytest.approx(1.5, abs=1e-9)
         assert e["translation_cm"] == pytest.approx(5.0, abs=1e-9)
-        assert e["x_cm"] == pytest.approx(3.0) and e["y_cm"] == pytest.approx(-4.0)
+        assert e["x_cam_cm"] == pytest.approx(3.0) and e["y_cam_cm"] == pytest.approx(-4.0)
+
+    def test_per_axis_errors_in_the_lidar_frame_are_the_correction_from_the_reference(self):
+        """x/y/z_lidar_cm and the angles are the correction's own axes: T_est = T_ref @ D(e),
+        whatever the reference's rotation (the camera-frame x/y/z differ from them)."""
+        T_ref = correction_matrix([0.1, -0.2, 0.3, 80, -20, 95])      # a LiDAR turned away
+        e_true = np.r_[0.02, -0.05, 0.01, 0.4, -0.3, 0.2]              # m, deg
+        e = pose_error(T_ref @ correction_matrix(e_true), T_ref)
+        got = [e["x_lidar_cm"] / 100, e["y_lidar_cm"] / 100, e["z_lidar_cm"] / 100,
+               e["yaw_deg"], e["pitch_deg"], e["roll_deg"]]
+        np.testing.assert_allclose(got, e_true, atol=1e-9)
+        cam = np.r_[e["x_cam_cm"], e["y_cam_cm"], e["z_cam_cm"]]
+        assert np.linalg.norm(cam) == pytest.approx(e["translation_cm"])
+        assert not np.allclose(cam, 100 * e_true[:3], atol=0.5)
+        batch = pose_error(np.stack([T_ref, T_ref @ correction_matrix(e_true)]), T_ref)
+        assert batch["x_lidar_cm"].shape == (2,)
+        assert batch["x_lidar_cm"][1] == pytest.approx(2.0)
 
     def test_small_angles_are_accurate(self):
         R = rotation_zyx(1e-6, 0, 0)

@@ -39,6 +39,37 @@ def test_jackknife_is_the_standard_error_of_the_frame_minima(bowls):
     np.testing.assert_allclose(x[:6] + step0, bowls.m[0], atol=1e-9)
 
 
+class TiltedFrames(QuadraticFrames):
+    """Frames whose bowls curve up or down in roll by turns: the mean is flat in roll."""
+
+    def __init__(self, minima, H, sign):
+        super().__init__(minima, H)
+        self.sign = np.asarray(sign, float)
+
+    def chamfer(self, X, ucb_k=None):
+        d = X[:, None, :6] - self.m[None]
+        Hf = np.tile(self.H, (len(self.m), 1, 1))
+        Hf[:, 5, 5] *= self.sign
+        per = np.einsum("cfi,fij,cfj->cf", d, Hf, d)
+        return {"f1": per.mean(axis=1), "per_frame": per}
+
+
+def test_a_curvature_the_frames_do_not_agree_on_is_not_divided_by(rng):
+    """Roll curves up in half the frames and down in the others: the mean has no curvature in
+    roll to speak of, and dividing the frames' disagreement by it would give any standard error
+    at all. The jackknife divides by no less than the curvature's own uncertainty, so roll's
+    error stays of the order of the frames' spread; the well-curved axes keep theirs."""
+    h = np.array([0.01] * 3 + [0.1] * 3)
+    H = np.diag(1.0 / h**2)
+    minima = rng.normal(scale=[0.01, 0.01, 0.01, 0.05, 0.05, 0.05], size=(12, 6))
+    frames = TiltedFrames(minima, H, [1, -1] * 6)
+    x = np.r_[minima.mean(axis=0), 100.0]
+    se = quality_report(frames, x)["jackknife_se"]
+    assert 0 < se["roll"] < 5 * minima[:, 5].std()
+    expect = minima[:, 0].std(ddof=1) / np.sqrt(12) * 100                 # cm
+    assert se["x"] == pytest.approx(expect, rel=1e-6)
+
+
 def test_curvature_and_flattest_direction(bowls):
     x = np.r_[bowls.m.mean(axis=0), 100.0]
     q = quality_report(bowls, x)

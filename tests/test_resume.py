@@ -21,6 +21,8 @@ from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import correction_matrix
 from paretocal.search.checkpoint import Checkpoint, SearchInterrupted
 
+from .helpers import default_sigint
+
 SMALL = Settings().replace(search={"pop": 24, "gens": 12, "seed": 3},
                            decision={"refine": False})
 
@@ -318,7 +320,8 @@ def test_ctrl_c_at_any_time_prints_one_line_and_no_traceback(tmp_path, raw_date,
     run = tmp_path / "run"
     cmd = [sys.executable, "-m", "paretocal", "calibrate", str(raw_date), "--out", str(run),
            "--gens", "3000"] + CLI
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     time.sleep(0.02)

@@ -9,8 +9,8 @@ import pytest
 from paretocal.config import Settings
 from paretocal.stage import Stage
 from paretocal.quality import AXES
-from paretocal.verdict import (RESOLUTION_PX, Z95, contrast_evidence, interval_text, intervals, resolution,
-                               restart_evidence)
+from paretocal.verdict import (Z95, alignment_px, contrast_evidence, interval_text, intervals,
+                               pose_per_px, resolution, restart_evidence)
 
 SETTINGS = Settings().replace(search={"pop": 60, "gens": 30},
                               decision={"restarts": 1, "restart_share": 1.0})
@@ -121,21 +121,79 @@ def test_resolution_is_the_step_that_moves_points_one_pixel(stage):
         assert displacement_px(stage.objective, x, y) == pytest.approx(1.0, rel=0.05)
 
 
-def test_intervals_combine_jackknife_and_resolution():
+def test_intervals_combine_jackknife_and_alignment():
     se = {"x": 3.0, "y": 4.0, "z": float("nan"), "yaw": 0.1, "pitch": 50.0, "roll": 0.0}
-    res = np.array([0.04, 0.0, 0.01, 0.0, 0.1, 0.2])        # m and deg per pixel
-    iv = intervals({"jackknife_se": se}, res, Settings().search)
+    per_px = np.array([0.04, 0.0, 0.01, 0.0, 0.1, 0.2])      # m and deg per pixel rms
+    iv = intervals({"jackknife_se": se}, per_px, 1.5, Settings().search)
     h = iv["half_width"]
-    k = RESOLUTION_PX
-    assert h["x"] == pytest.approx(Z95 * np.hypot(3.0, k * 4.0), rel=1e-4)   # cm
+    assert h["x"] == pytest.approx(np.hypot(Z95 * 3.0, 1.5 * 4.0), rel=1e-4)    # cm
     assert h["y"] == pytest.approx(Z95 * 4.0, rel=1e-4)
-    assert h["roll"] == pytest.approx(Z95 * k * 0.2, rel=1e-4)
+    assert h["roll"] == pytest.approx(1.5 * 0.2, rel=1e-4)
     # No jackknife (one frame) or wider than the stated initial error (10 deg): undetermined.
     assert iv["undetermined"] == ["z", "pitch"] and h["z"] is None and h["pitch"] is None
+    assert iv["frame"] == "lidar" and iv["alignment_px"] == 1.5 and iv["per_px"]["x"] == 4.0
     text = interval_text({"intervals": iv})
     assert text.startswith(f"x +-{h['x']:.2g} cm, y +-7.8 cm") and text.endswith(
         "not determined by the data: z, pitch")
     assert interval_text({}) is None
+    # Without any matched edge the alignment is unknown: nothing is determined.
+    assert intervals({"jackknife_se": se}, per_px, float("nan"),
+                     Settings().search)["undetermined"] == list(AXES)
+
+
+def _rms_px(objective, x, d):
+    """The displacements (u, v of every feature point in view at x) that pose change d (6,)
+    causes, as one vector (px)."""
+    from paretocal.camera import project
+
+    sc = objective.scene
+    y = x.copy()
+    y[:6] += d
+    T = objective.transforms(np.vstack([x, y]))
+    out = []
+    for f in range(sc.n_frames):
+        uv, _, vis = project(sc.frame_xyz(f), sc.cameras[f], T, sc.z_min)
+        out.append((uv[1] - uv[0])[vis[0]].ravel())
+    return np.concatenate(out)
+
+
+def test_pose_per_px_is_the_largest_move_of_an_axis_per_pixel_rms(stage):
+    """Fixing one axis at a tenth of pose_per_px and letting the other five compensate, the
+    least rms displacement of the points (found by least squares on the projections
+    themselves) is a tenth of a pixel: pose_per_px is that axis's extent on the one-pixel
+    ellipsoid, wider than the one-axis resolution where axes trade (height against pitch)."""
+    from scipy.optimize import least_squares
+
+    x = _full(stage, np.zeros(6))
+    per = pose_per_px(stage.objective, x)
+    res = resolution(stage.objective, x)
+    assert np.all(np.isfinite(per)) and np.all(per > 0)
+    for a in (2, 3, 4):                                        # z, yaw, pitch
+        others = [i for i in range(6) if i != a]
+
+        def disp(p, a=a, others=others):
+            d = np.zeros(6)
+            d[a] = 0.1 * per[a]
+            d[others] = p
+            return _rms_px(stage.objective, x, d)
+        fit = least_squares(disp, np.zeros(5), x_scale=per[others], diff_step=1e-3)
+        rms = np.sqrt(np.mean(fit.fun ** 2) * 2)               # per point: |du, dv|
+        assert rms == pytest.approx(0.1, rel=0.05), (AXES[a], rms)
+    assert per[2] > 1.5 * res[2]                               # z trades against pitch
+
+
+def test_alignment_is_the_median_distance_of_edge_points_to_image_edges(stage):
+    """At the local optimum about KITTI's reference the LiDAR edges lie a pixel or two from
+    the image edges; a pose 5 px away puts them farther (not 5 px farther: in a street full
+    of edges each point then finds another edge nearby)."""
+    from paretocal.quality import local_optimum
+
+    x = local_optimum(stage.objective, _full(stage, np.zeros(6)))
+    near = alignment_px(stage.objective, x)
+    off = x.copy()
+    off[3] += 5 * resolution(stage.objective, x)[3]            # yaw: 5 px
+    far = alignment_px(stage.objective, off)
+    assert 0.5 < near < 3.0 and far > near + 0.3, (near, far)
 
 
 def test_the_start_is_compared_with_an_untrusted_result(stage, raw_frames):

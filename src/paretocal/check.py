@@ -16,7 +16,8 @@ import numpy as np
 from .config import Settings
 from .geometry import pose_error
 from .io.frame import Frame
-from .quality import displacement_px, local_optimum, neighbour_fraction, quality_report
+from .quality import (displacement_px, local_optimum, neighbour_fraction, pixel_fd_step,
+                      quality_report)
 
 NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
 
@@ -34,7 +35,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     dict
         ``verdict`` ("calibrated" or "miscalibrated"), ``score`` (the move to the local optimum
         relative to the tolerances; above 1 is miscalibrated), ``moved`` (deg, cm, px),
-        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_local_optimum``, the
+        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_checked`` (``T``),
+        ``T_local_optimum``, the
         ``quality`` report at the local optimum, and ``weak`` with ``notes``: True when the
         check itself has too little to go on (fewer frames than a calibration needs to be
         trusted), with what to do.
@@ -66,7 +68,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
              "translation_cm": float(move["translation_cm"]),
              "pixels": displacement_px(obj, x0, xo)}
     score = max(moved["rotation_deg"] / rot_tol_deg, moved["translation_cm"] / trans_tol_cm)
-    quality = quality_report(obj, xo)
+    quality = quality_report(obj, xo, pixel_fd_step(obj, xo))
     tick("check", 3, 3)
     from .pipeline import RELIABLE_MIN_FRAMES
 
@@ -85,6 +87,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "neighbour_fraction": frac,
         "best_neighbour_gain_px": gain,
         "neighbour_step": {"translation_cm": 5.0, "rotation_deg": 0.5},
+        "T_checked": T.tolist(),
         "T_local_optimum": T_opt.tolist(),
         "quality": quality,
         "frames": [f.name for f in frames],

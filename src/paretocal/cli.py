@@ -84,17 +84,35 @@ def _setup_logging(verbose: bool, quiet: bool) -> None:
 
 
 class _Progress:
-    """Rich progress bars on a terminal; nothing otherwise."""
+    """A command's progress on stderr: rich bars on a terminal; on anything else (a pipe, a log
+    file, CI) one line per stage as it begins, with the time since the command started, so
+    that a long run shows where it is; nothing with ``--quiet``.
+
+    Called as ``progress(stage, done, total)``. The pipeline's phases without a count of
+    their own (``paretocal.pipeline.PHASES``: loading, locating the LiDAR, ...) report
+    ``(phase, 0, 1)`` and ``(phase, 1, 1)``: a line each, no bar."""
 
     LABELS = {"features": "features", "search": "NSGA-II generations", "polish": "polish"}
+    #: What the line of a counted stage says, ``{total}`` its count.
+    LINES = {"features": "extracting features ({total} frames)",
+             "search": "searching ({total} NSGA-II generations)",
+             "polish": "polishing the front",
+             "check": "checking the extrinsic", "depth maps": "writing {total} depth maps",
+             "frames": "writing the frames ({total} files)",
+             "entries": "running {total} entries"}
 
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
+    def __init__(self, quiet: bool, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.mode = None if quiet else "bars" if self.stream.isatty() else "lines"
         self.bar = None
         self.tasks = {}
+        self.stage = None
 
     def __enter__(self):
-        if self.enabled:
+        import time
+
+        self.t0 = time.perf_counter()
+        if self.mode == "bars":
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn)
             self.bar = Progress(TextColumn("{task.description:<22}"), BarColumn(),
@@ -103,15 +121,35 @@ class _Progress:
         return self
 
     def __call__(self, stage: str, done: int, total: int) -> None:
-        if self.bar is None:
+        if self.mode == "lines":
+            self._line(stage, total)
+        if self.bar is None or (stage not in self.LABELS and stage in _phases()):
             return
         if stage not in self.tasks:
             self.tasks[stage] = self.bar.add_task(self.LABELS.get(stage, stage), total=total)
         self.bar.update(self.tasks[stage], completed=done, total=total)
 
+    def _line(self, stage: str, total: int) -> None:
+        """One line when a new stage begins (a stage reports many times)."""
+        import time
+
+        if stage == self.stage:
+            return
+        self.stage = stage
+        text = self.LINES.get(stage) or _phases().get(stage) or stage
+        print(f"paretocal: {time.perf_counter() - self.t0:7.1f} s  {text.format(total=total)}",
+              file=self.stream, flush=True)
+
     def __exit__(self, *exc):
         if self.bar is not None:
             self.bar.__exit__(*exc)
+
+
+def _phases() -> dict:
+    """The pipeline's phases and what the run does in each (``paretocal.pipeline.PHASES``)."""
+    from .pipeline import PHASES
+
+    return PHASES
 
 
 def read_init(path: Path, source, camera: int | None):
@@ -158,6 +196,13 @@ def _fmt_err(e: dict | None) -> str:
     if not e:
         return "n/a"
     return f"{e['rotation_deg']:.3f} deg / {e['translation_cm']:.2f} cm"
+
+
+def _fmt_axes(e: dict) -> str:
+    """The per-axis errors of :func:`paretocal.geometry.pose_error` in the LiDAR frame (the
+    correction's axes, those of the intervals): ``"x +0.47 cm, ..., roll -0.03 deg"``."""
+    keys = ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg", "pitch_deg", "roll_deg")
+    return ", ".join(f"{k.split('_')[0]} {e[k]:+.3g} {k.rsplit('_', 1)[1]}" for k in keys)
 
 
 @app.command()
@@ -328,7 +373,6 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     for name in [camera] if camera is not None else names:
         _check_run_out(out / name, force)
     T_inits = {camera: read_init(init, source, None)} if init is not None else None
-    interactive = sys.stderr.isatty() and not quiet
     unreliable = []
 
     def said(name, result):
@@ -341,7 +385,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
             unreliable.append(name)
 
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
                                     checkpoint_every, progress, on_camera=said,
@@ -365,9 +409,8 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     from .errors import Interrupted
     from .rundir import calibrate_run, resume_run
 
-    interactive = sys.stderr.isatty() and not quiet
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             if resume:
                 result = resume_run(out, checkpoint_every, progress=progress)
             else:
@@ -387,9 +430,11 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"wrote {out}")
     from .verdict import interval_text
 
-    intervals = interval_text(result.reliability)
+    if ref is not None:
+        typer.echo(f"paretocal: error vs reference per axis (LiDAR frame): {_fmt_axes(ref)}")
+    intervals = interval_text(result.reliability)         # only for a result judged ok
     if intervals:
-        typer.echo(f"paretocal: 95 % intervals of the correction: {intervals}")
+        typer.echo(f"paretocal: 95 % intervals per axis (LiDAR frame): {intervals}")
     typer.echo(verdict_line(result.reliability))
     if strict and result.reliability["verdict"] != "ok":
         raise typer.Exit(STRICT_EXIT)
@@ -494,8 +539,8 @@ def _check_perturbation(rot: float, trans: float) -> None:
 @app.command()
 def check(
     source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
-    extrinsic: Annotated[Path, typer.Option(help="Extrinsic to check (YAML/JSON with "
-                                                 "T_cam_lidar).")],
+    extrinsic: Annotated[Optional[Path], typer.Option(
+        help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
     camera: Camera = 2,
     out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
@@ -505,7 +550,8 @@ def check(
     verbose: Verbose = False,
     quiet: Quiet = False,
 ) -> None:
-    """Say whether EXTRINSIC is calibrated for SOURCE, without ground truth."""
+    """Say whether an extrinsic (--extrinsic, or the dataset's own) is calibrated for SOURCE,
+    without ground truth."""
     import json
 
     from .check import check_extrinsic
@@ -519,19 +565,48 @@ def check(
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
-    T = read_init(extrinsic, source, camera)
+    T = read_init(extrinsic, source, camera) if extrinsic is not None else None
     loaded = load_frames(source, frames, camera)
-    with _Progress(sys.stderr.isatty() and not quiet) as progress:
+    if T is None:
+        T = loaded[0].T_ref
+        if T is None:
+            raise ParetocalError(f"{source}: the dataset has no extrinsic of its own "
+                                 "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
+    with _Progress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
+    r["extrinsic_from"] = str(extrinsic) if extrinsic is not None else "dataset"
     if out is not None:
         atomic_write_text(out, json.dumps(r, indent=2) + "\n")
     m = r["moved"]
-    typer.echo(f"paretocal: {r['verdict'].upper()} (score {r['score']:.2f}; the local optimum is "
-               f"{m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / {m['pixels']:.1f} px "
-               f"away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+    which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
+    typer.echo(f"paretocal: {which}: {r['verdict'].upper()} (score {r['score']:.2f}; the local "
+               f"optimum is {m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / "
+               f"{m['pixels']:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
                f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
+    typer.echo(f"paretocal: {_features_line(r['features'])}")
     for note in r["notes"]:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
+
+
+def _features_line(features: dict) -> str:
+    """What the objective compared, in one line: the feature points per frame by group, the
+    rings, and the frames whose depth edges look like noise (``stage.feature_counts``)."""
+    mean = features["per_frame_mean"]
+    rings = features["rings"]
+    ring_text = ("no rings" if not rings else
+                 f"{'/'.join(str(r) for r in rings)} rings")
+    rec = features.get("ring_recovery")
+    if rec:
+        ring_text += f" ({', '.join(rec['methods'])}, purity >= {rec['min_purity']:.2f})"
+    line = (f"features per frame: {mean['depth_edge']:g} depth edges, "
+            f"{mean['intensity_edge']:g} intensity edges, {mean['smooth']:g} smooth points "
+            f"in view; {ring_text}; {features['frames_contributing']} of "
+            f"{len(features['per_frame'])} frames contribute")
+    noise = features["noise"]
+    if noise:
+        line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
+                 f"{noise[0]['frame']}: {noise[0]['reason']})")
+    return line
 
 
 @app.command()
@@ -577,8 +652,7 @@ def study(
                                    else settings.camera)
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
-    interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
+    with _Progress(quiet) as progress:
         doc = run_study(loaded, out, T_init, settings, plan, progress=progress)
     cal = doc["calibration"]
     rb = doc["robustness"]
@@ -615,8 +689,7 @@ def depth(
     T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
-    interactive = sys.stderr.isatty() and not quiet
-    with _Progress(interactive) as progress:
+    with _Progress(quiet) as progress:
         for k, f in enumerate(loaded):
             write_depth(f, T, out, max_depth=max_depth)
             progress("depth maps", k + 1, len(loaded))
@@ -629,10 +702,12 @@ def extract(
                                              "folder.")],
     out: Annotated[Path, typer.Option("--out", help="Folder to create (the generic layout: "
                                                     "calib.yaml, images/, points/).")],
-    image_topic: Annotated[str, typer.Option(
-        "--image-topic", help="sensor_msgs/Image or CompressedImage (JPEG, PNG) topic.")],
-    cloud_topic: Annotated[str, typer.Option("--cloud-topic",
-                                             help="sensor_msgs/PointCloud2 topic.")],
+    image_topic: Annotated[Optional[str], typer.Option(
+        "--image-topic", help="sensor_msgs/Image or CompressedImage (JPEG, PNG) topic; "
+                              "default: the bag's only one.")] = None,
+    cloud_topic: Annotated[Optional[str], typer.Option(
+        "--cloud-topic", help="sensor_msgs/PointCloud2 topic; default: the bag's only "
+                              "one.")] = None,
     camera_info_topic: Annotated[Optional[str], typer.Option(
         "--camera-info-topic", help="sensor_msgs/CameraInfo topic; default: the one beside "
                                     "the image topic, or the bag's only one.")] = None,
@@ -649,15 +724,27 @@ def extract(
     quiet: Quiet = False,
 ) -> None:
     """Extract image-cloud pairs from a ROS bag into a generic folder (calib.yaml, images/,
-    points/, extract.json) that calibrate, check, depth and study read."""
-    from .extract import REPORT, extract_bag
+    points/, extract.json) that calibrate, check, depth and study read.
+
+    Without --image-topic or --cloud-topic, the bag's only image topic and only PointCloud2
+    topic are used; when there are several, the topics are listed and the command exits 2."""
+    from .extract import REPORT, choose_topics, extract_bag
     from .io import read_extrinsic
 
     _setup_logging(verbose, quiet)
+    if image_topic is None or cloud_topic is None:
+        pick = choose_topics(bag, image_topic, cloud_topic)
+        if pick.image_topic is None or pick.cloud_topic is None:
+            typer.echo(f"paretocal: the topics of {bag}:\n{pick.listing}")
+            raise ParetocalError(pick.missing(bag))
+        typer.echo(f"paretocal: using {' and '.join(pick.chosen)} (the bag's only "
+                   f"{'topic' if len(pick.chosen) == 1 else 'topics'} of "
+                   f"{'that kind' if len(pick.chosen) == 1 else 'those kinds'})")
+        image_topic, cloud_topic = pick.image_topic, pick.cloud_topic
     entries = _calib_entries(calib) if calib is not None else {}
     if init is not None:
         entries["T_cam_lidar"] = read_extrinsic(init)
-    with _Progress(sys.stderr.isatty() and not quiet) as progress:
+    with _Progress(quiet) as progress:
         r = extract_bag(bag, out, image_topic, cloud_topic, camera_info_topic, max_dt=max_dt,
                         every=every, limit=limit, calib=entries, progress=progress)
     c, dt = r["counts"], r["dt_ms"]
@@ -737,9 +824,8 @@ def batch(
         check_own_folder(out, BATCH_MARKS, "batch")
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
-    interactive = sys.stderr.isatty() and not quiet
     try:
-        with _Progress(interactive) as progress:
+        with _Progress(quiet) as progress:
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
                           progress=lambda d, t: progress("entries", d, t),
                           dataset_options=not states_init_error(config))

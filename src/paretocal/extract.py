@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -128,6 +129,64 @@ def extract_bag(bag: str | Path, out: str | Path, image_topic: str, cloud_topic:
             shutil.rmtree(staging, ignore_errors=True)
             raise
     return report
+
+
+#: The kinds of topic extract can use, in the order listed, by message type.
+TOPIC_KINDS = {IMAGE: "image", COMPRESSED_IMAGE: "compressed image",
+               POINT_CLOUD2: "point cloud", CAMERA_INFO: "camera info"}
+
+
+@dataclass
+class TopicChoice:
+    """The topics to extract when the command line leaves some out (:func:`choose_topics`)."""
+
+    image_topic: str | None          #: as given, the bag's only candidate, or None
+    cloud_topic: str | None
+    chosen: list[str]                #: the options filled in, ``"--cloud-topic /points"``
+    candidates: dict[str, list[str]]  #: topic names by kind (:data:`TOPIC_KINDS` and "other")
+    listing: str                     #: every topic, one line each: kind, name, type, count
+
+    def missing(self, bag: str | Path) -> str:
+        """The one-line error when a topic could not be chosen: the options to pass and the
+        candidates for each."""
+        c = self.candidates
+
+        def names(*kinds):
+            return ", ".join(n for k in kinds for n in c[k]) or "none"
+        need = []
+        if self.image_topic is None:
+            need.append(f"--image-topic TOPIC (image topics: "
+                        f"{names('image', 'compressed image')})")
+        if self.cloud_topic is None:
+            need.append(f"--cloud-topic TOPIC (point cloud topics: {names('point cloud')})")
+        return (f"{bag}: which topics to extract? pass {' and '.join(need)}; camera info "
+                f"topics: {names('camera info')}; the bag's topics are listed on stdout")
+
+
+def choose_topics(bag: str | Path, image_topic: str | None = None,
+                  cloud_topic: str | None = None) -> TopicChoice:
+    """List the topics of ``bag`` and fill in the image and cloud topics not given: the bag's
+    only image topic (Image or CompressedImage), its only PointCloud2 topic."""
+    with Bag(bag) as b:
+        topics = b.topics
+    kinds = list(TOPIC_KINDS.values()) + ["other"]
+    kind = {t.name: TOPIC_KINDS.get(t.msgtype, "other") for t in topics.values()}
+    rows = sorted(topics.values(), key=lambda t: (kinds.index(kind[t.name]), t.name))
+    width = max([len(t.name) for t in rows], default=0)
+    listing = "\n".join(f"  {kind[t.name]:<16} {t.name:<{width}}  {t.msgtype}  {t.count} "
+                         f"message{'' if t.count == 1 else 's'}" for t in rows)
+    candidates = {k: [t.name for t in rows if kind[t.name] == k] for k in kinds}
+    images = candidates["image"] + candidates["compressed image"]
+    clouds = candidates["point cloud"]
+    chosen = []
+    if image_topic is None and len(images) == 1:
+        image_topic = images[0]
+        chosen.append(f"--image-topic {image_topic}")
+    if cloud_topic is None and len(clouds) == 1:
+        cloud_topic = clouds[0]
+        chosen.append(f"--cloud-topic {cloud_topic}")
+    return TopicChoice(image_topic, cloud_topic, chosen, candidates,
+                       listing or "  (the bag has no topics)")
 
 
 def _check_options(out: Path, max_dt, every: int, limit) -> None:

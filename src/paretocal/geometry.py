@@ -138,10 +138,13 @@ def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
     Returns
     -------
     dict
-        ``rotation_deg``: angle of ``R_est^T R_ref``; ``translation_cm``: ``|t_est - t_ref|``;
-        ``yaw_deg``, ``pitch_deg``, ``roll_deg``: ZYX angles of the residual rotation
-        ``R_ref^T R_est`` expressed in the LiDAR frame (the search's own axes);
-        ``x_cm``, ``y_cm``, ``z_cm``: ``t_est - t_ref`` in the camera frame.
+        ``rotation_deg``: angle of ``R_est^T R_ref``; ``translation_cm``: ``|t_est - t_ref|``.
+        Per axis, in the LiDAR frame (the correction's own axes): ``x_lidar_cm``,
+        ``y_lidar_cm``, ``z_lidar_cm``, ``yaw_deg``, ``pitch_deg``, ``roll_deg``, the correction
+        that takes the reference to the estimate, ``T_est = T_ref @ D(...)`` (translation
+        ``R_ref^T (t_est - t_ref)``, ZYX angles of ``R_ref^T R_est``). In the camera frame:
+        ``x_cam_cm``, ``y_cam_cm``, ``z_cam_cm``, ``t_est - t_ref``. Each value has shape
+        ``T_est.shape[:-2]``.
     """
     T_est = np.asarray(T_est, dtype=np.float64)
     T_ref = np.asarray(T_ref, dtype=np.float64)
@@ -149,11 +152,13 @@ def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
     dR = np.swapaxes(R_est, -1, -2) @ R_ref
     dt = (T_est[..., :3, 3] - T_ref[:3, 3]) * 100.0
     ypr = euler_zyx(R_ref.T @ R_est)
+    dl = dt @ R_ref                                      # R_ref^T dt, row-wise
     return {
         "rotation_deg": rotation_angle_deg(dR),
         "translation_cm": np.linalg.norm(dt, axis=-1),
+        "x_lidar_cm": dl[..., 0], "y_lidar_cm": dl[..., 1], "z_lidar_cm": dl[..., 2],
         "yaw_deg": ypr[..., 0], "pitch_deg": ypr[..., 1], "roll_deg": ypr[..., 2],
-        "x_cm": dt[..., 0], "y_cm": dt[..., 1], "z_cm": dt[..., 2],
+        "x_cam_cm": dt[..., 0], "y_cam_cm": dt[..., 1], "z_cam_cm": dt[..., 2],
     }
 
 

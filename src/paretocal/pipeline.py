@@ -20,7 +20,7 @@ from .features.lidar import GROUP_NAMES
 from .geometry import pose_error
 from .io.frame import Frame
 from .io.layouts import load_frames, source_options
-from .quality import quality_report
+from .quality import at_every_point, pixel_fd_step, quality_report
 from .search import coarse_seeds, polish_front, run_nsga2
 from .search.basin import prefer_near
 from .search.checkpoint import Checkpoint, fingerprint
@@ -55,8 +55,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         defaults these leave (:func:`~paretocal.config.dataset_settings`), as on the command
         line; frames already loaded are calibrated with the settings as given.
     progress : callable, optional
-        ``progress(stage, done, total)`` for ``stage`` in ``features``, ``search``, ``polish``
-        (the polish reports its passes: the first, and the one after re-selecting points).
+        ``progress(stage, done, total)`` for ``stage`` in ``features`` (frames), ``search``
+        (generations), ``polish`` (its passes: the first, and the one after re-selecting
+        points), each from ``done = 0`` as it begins; and ``(phase, 0, 1)`` as each other
+        phase of :data:`PHASES` begins, ``(phase, 1, 1)`` as it ends.
     checkpoint : Checkpoint, optional
         Save the search every few generations and resume from a saved state of the same run
         (see :mod:`paretocal.search.checkpoint`); an interrupt during the search raises
@@ -80,7 +82,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     report = _reporter(progress)
-    with _timed(timings, "load"):
+    with _timed(timings, "load", progress):
         frames = _load(source, settings)
     check_population_memory(settings.search.pop, len(frames))
     T_init, T_ref = resolve_init(frames, T_init)
@@ -91,14 +93,16 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         frames = lidar.for_camera(frames)
         lidar_info, rings, motion_info = lidar.lidar_info, lidar.rings, lidar.motion_info
     else:
-        with _timed(timings, "lidar_pose"):
+        with _timed(timings, "lidar_pose", progress):
             frames, lidar_info, first_rings = locate_lidar(frames, settings)
-        with _timed(timings, "rings"):
+        with _timed(timings, "rings", progress):
             # Rings from the sweeps as recorded (each return on its laser's cone about the
             # sensor); everything else from the sweeps de-skewed to the image time.
             rings = sweep_rings(frames, settings, first_rings, [(frames[0].camera, T_init)])
-        with _timed(timings, "motion"):
+        with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
+    if progress is not None:
+        progress("features", 0, len(frames))
     with _timed(timings, "features"):
         # A resumed run decides with the cost model the interrupted run measured.
         stored = checkpoint.stored_cost_model() if checkpoint is not None else None
@@ -110,11 +114,11 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         warn_rings(frames, rings)
         log_features(stage.feats)
         _check_budget(stage, settings.decision)
-    res, seeds = _search(stage, frames, T_init, settings, checkpoint, report, timings)
+    res, seeds = _search(stage, frames, T_init, settings, checkpoint, progress, timings)
     try:
         stage, X, F, basin, evaluations = _refine(stage, res, frames, rings, T_init, settings,
                                                   progress, timings)
-        with _timed(timings, "decision"):
+        with _timed(timings, "decision", progress):
             T, columns, costs, best = front_columns(stage, X, F, T_init, T_ref, settings)
             d = settings.decision
             i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
@@ -126,8 +130,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             decision["measured_ms"] = time_per_candidate(
                 stage.scene, get_evaluator(settings.objective.evaluator), T[i],
                 decision["n_points"])
-            quality = quality_report(stage.objective, X[i])
-        with _timed(timings, "verdict"):
+            quality = quality_report(stage.objective, X[i],
+                                     pixel_fd_step(stage.objective, at_every_point(
+                                         stage.objective, X[i])))
+        with _timed(timings, "verdict", progress):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
                                        X[i], quality)
     except Interrupted as exc:
@@ -155,17 +161,23 @@ PHASES = {"load": "loading the frames", "lidar_pose": "locating the LiDAR",
           "rings": "recovering the LiDAR rings", "motion": "compensating the motion",
           "features": "extracting features", "seed_grid": "scoring the seed grid",
           "polish": "polishing the front", "reselect": "re-selecting the points at the estimate",
-          "decision": "choosing the solution", "verdict": "gathering the verdict's evidence"}
+          "decision": "choosing the solution", "verdict": "gathering the verdict's evidence",
+          "writing": "writing the results"}
 
 
 @contextmanager
-def _timed(timings: dict[str, float], name: str):
+def _timed(timings: dict[str, float], name: str, progress=None):
     """Add the wall time of the block to ``timings[name]`` (s); an interrupt in the block
-    becomes :class:`~paretocal.errors.Interrupted` naming the phase."""
+    becomes :class:`~paretocal.errors.Interrupted` naming the phase. ``progress``, when given,
+    is told ``(name, 0, 1)`` as the block begins and ``(name, 1, 1)`` when it is done."""
     t0 = time.perf_counter()
     try:
         STOP.check()
+        if progress is not None:
+            progress(name, 0, 1)
         yield
+        if progress is not None:
+            progress(name, 1, 1)
         STOP.check()
     except KeyboardInterrupt:
         STOP.clear()                              # taken
@@ -201,11 +213,11 @@ def _check_budget(stage: Stage, d) -> None:
 
 
 def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Settings,
-            checkpoint: Checkpoint | None, report, timings: dict):
+            checkpoint: Checkpoint | None, progress, timings: dict):
     """The seed grid and NSGA-II over the stage's objective: ``(SearchResult, seeds)``."""
     seeds = None
     if settings.search.seed_grid_deg:
-        with _timed(timings, "seed_grid"):
+        with _timed(timings, "seed_grid", progress):
             seeds = coarse_seeds(stage.feats, T_init, settings.search, settings.objective,
                                  settings.features.z_min, stage.cost, stage.n_max)
     if checkpoint is not None:
@@ -217,8 +229,10 @@ def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Set
             searched, T_init, stage.n_min, stage.n_max,
             [(f.name, len(f.points), list(f.image.shape)) for f in frames],
             seeds if seeds is not None else np.zeros(0))
+    if progress is not None:
+        progress("search", 0, settings.search.gens)
     res = run_nsga2(stage.objective, settings.search, stage.n_min, stage.n_max,
-                    report("search"), seeds=seeds, checkpoint=checkpoint)
+                    _reporter(progress)("search"), seeds=seeds, checkpoint=checkpoint)
     timings["search"] = res.wall_s
     timings["search_objective"] = res.objective_s
     return res, seeds

@@ -6,9 +6,9 @@ around the extrinsic (28 candidates), read frame by frame:
 * **curvature per degree of freedom**: the Hessian of the objective (px per cm^2 or deg^2); the
   displacement along each axis that raises the objective by 0.01 px; and the flattest direction,
   the combination of axes the scene constrains least.
-* **agreement across frames**: a Newton step from the extrinsic on each leave-one-frame-out
-  objective gives F nearly independent estimates of the optimum; their jackknife spread is the
-  standard error of each axis (deg, cm), and each frame's own step says which frames disagree.
+* **agreement across frames**: the jackknife standard error of each axis (deg, cm), linearised
+  (each frame's gradient through the mean objective's Hessian); and each frame's own Newton
+  step, which says which frames disagree.
 * **miscalibration check** (after Levinson & Thrun, RSS 2013): a correct extrinsic is a local
   minimum of the objective, so few of its grid neighbours score better; and the local optimum
   found from it lies within a pixel or two of it. The verdict uses the pixel displacement of the
@@ -22,9 +22,25 @@ import numpy as np
 from .geometry import correction_matrix
 from .search.polish import DEFAULT_FD_STEP, fd_stencil, newton_step, stencil_derivatives
 
+#: The Newton steps' floor on the Hessian's eigenvalues, relative to the largest
+#: (:func:`paretocal.search.polish.newton_step`'s default).
+EIG_FLOOR = 1e-3
+
 AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
 TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for display
+
+#: Finite-difference step of the run's quality report, in pixels: each axis is stepped by the
+#: change that moves the projected feature points by this much on average. The objective reads
+#: distance transforms of pixel-quantised edges, so differences over steps of about a pixel
+#: measure that quantisation rather than the objective's shape: with the fixed 1 cm / 0.1 deg
+#: steps (0.4-1.5 px on KITTI) the jackknife standard errors came out up to 10-50 times their
+#: value with larger steps (z 10 cm for a result 1.1 cm off); from 2 to 8 times the fixed
+#: steps they agree within a factor of 2 (14 KITTI results).
+FD_STEP_PX = 2.0
+#: ... and never beyond ten fixed steps (10 cm, 1 deg): an axis that hardly moves the points
+#: is not determined, whatever the step.
+MAX_FD_STEP = 10.0 * DEFAULT_FD_STEP
 
 
 def _derivatives(values: np.ndarray, h: np.ndarray):
@@ -36,6 +52,40 @@ def _derivatives(values: np.ndarray, h: np.ndarray):
 def _newton_step(g: np.ndarray, H: np.ndarray, h: np.ndarray, max_units: float = 10.0):
     """Step (6,) in m and deg to the minimum of the local quadratic (|eigenvalues| floored)."""
     return newton_step(g[None], H[None], h, max_units)[0]
+
+
+def _jackknife_se(per_frame: np.ndarray, H: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Jackknife standard errors (6,) in m and deg of the optimum of the mean over frames.
+
+    Linearised (the infinitesimal jackknife): leaving frame f out moves the optimum by
+    ``H^-1 (g_f - g_mean) / (F - 1)``, with ``g_f`` frame f's gradient (from the stencil
+    values ``per_frame`` (28, F)) and ``H`` (6, 6) the Hessian of the mean, so the variance is
+    ``H^-1 B H^-1`` with ``B = sum_f (g_f - g_mean)(g_f - g_mean)^T / (F (F - 1))``.
+
+    A Newton step on each leave-one-out objective, each with its own Hessian, gives the same
+    where the objective is well curved; but along its flattest direction (camera height
+    against pitch, barely curved or slightly concave at the steps' scale) one frame more or
+    less changes that Hessian's smallest eigenvalue enough to scatter the steps (2-10 times
+    these errors, more the larger the steps). Even through the common Hessian, a curvature the
+    frames do not pin down must not be divided by: each eigenvalue of ``H`` is taken in
+    absolute value and raised to twice its standard error over the frames (the frames'
+    curvatures along its eigenvector), and to :data:`EIG_FLOOR` times the largest, as the
+    Newton steps floor it. Without that, a smallest eigenvalue near zero gave 14 cm in z for
+    KITTI results 1-2 cm off. NaN with one frame.
+    """
+    F = per_frame.shape[1]
+    if F < 2:
+        return np.full(6, np.nan)
+    _, G, Hf = stencil_derivatives(per_frame.T, h)                     # (F, 6), (F, 6, 6)
+    D = G - G.mean(axis=0)
+    B = D.T @ D / (F * (F - 1))
+    scale = np.outer(h, h)                                              # to units of h
+    w, V = np.linalg.eigh(H * scale)
+    c = np.einsum("ik,fij,jk->fk", V, Hf * scale, V)                   # frames' curvatures
+    w = np.maximum.reduce([np.abs(w), 2.0 * c.std(axis=0, ddof=1) / np.sqrt(F),
+                           np.full(6, max(np.abs(w).max() * EIG_FLOOR, 1e-12))])
+    Hi = (V / w) @ V.T * scale
+    return np.sqrt(np.maximum(np.diag(Hi @ B @ Hi), 0.0))
 
 
 def at_every_point(objective, x: np.ndarray) -> np.ndarray:
@@ -56,13 +106,15 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     x : ndarray, shape (7,)
         The solution ``[x, y, z, yaw, pitch, roll, n]``; evaluated with every point.
     h : ndarray, shape (6,)
-        Finite-difference steps (m, deg).
+        Finite-difference steps (m, deg); a run uses :func:`pixel_fd_step`.
 
     Returns
     -------
-    dict, ready for JSON: ``curvature`` per axis, ``tolerance_0p01`` per axis, ``flattest``
-    direction, ``jackknife_se`` per axis, ``frame_steps`` (each frame's Newton step), and
-    ``well_observed`` per axis.
+    dict, ready for JSON: ``frame`` (``"lidar"``: every per-axis figure is on the
+    correction's axes, translation in the LiDAR frame), ``curvature`` per axis,
+    ``fd_step`` (``h``), ``tolerance_0p01`` per axis, ``flattest`` direction, ``jackknife_se``
+    per axis,
+    ``frame_steps`` (each frame's Newton step), and ``well_observed`` per axis.
     """
     x = at_every_point(objective, x)
     S = fd_stencil(h)
@@ -77,23 +129,17 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     flat = V[:, 0] * h
     flat /= np.abs(flat / np.r_[[0.01] * 3, [0.1] * 3]).max()         # largest part 1 cm / 0.1 deg
     steps = np.array([_newton_step(*_derivatives(per_frame[:, f], h), h) for f in range(F)])
-    if F > 1:
-        loo = []
-        for f in range(F):
-            keep = np.arange(F) != f
-            loo.append(_newton_step(*_derivatives(per_frame[:, keep].mean(axis=1), h), h))
-        loo = np.array(loo)
-        se = np.sqrt((F - 1) / F * ((loo - loo.mean(axis=0)) ** 2).sum(axis=0))
-    else:
-        se = np.full(6, np.nan)
+    se = _jackknife_se(per_frame, H, h)
     full_step = _newton_step(g, H, h)
 
     def per_axis(v):
         return {a: float(val) for a, val in zip(AXES, v * TO_REPORT)}
 
     return {
+        "frame": "lidar",                     # the per-axis figures are the correction's axes
         "units": dict(zip(AXES, UNITS)),
         "frames": int(F),
+        "fd_step": per_axis(np.asarray(h, dtype=np.float64)),
         "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)
                                    for i, (a, c) in enumerate(zip(AXES, curv))},
         "tolerance_0p01px": per_axis(tol),
@@ -105,6 +151,27 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
         "well_observed": {a: bool(np.isfinite(v) and v < (3.0 if u == "cm" else 0.2))
                           for a, v, u in zip(AXES, se * TO_REPORT, UNITS)},
     }
+
+
+def axis_resolution(objective, x: np.ndarray) -> np.ndarray:
+    """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
+    pixel on average at ``x`` (7,), the other axes held; inf for an axis that does not move
+    them."""
+    probe = np.r_[[0.01] * 3, [0.1] * 3]
+    out = np.empty(6)
+    for a in range(6):
+        y = np.array(x, dtype=np.float64, copy=True)
+        y[a] += probe[a]
+        px = displacement_px(objective, x, y)
+        out[a] = probe[a] / px if px > 0 else np.inf
+    return out
+
+
+def pixel_fd_step(objective, x: np.ndarray) -> np.ndarray:
+    """Finite-difference steps (6,) in m and deg for the quality report at ``x`` (7,): the
+    change of each axis that moves the points by :data:`FD_STEP_PX` pixels, at most
+    :data:`MAX_FD_STEP`."""
+    return np.minimum(FD_STEP_PX * axis_resolution(objective, x), MAX_FD_STEP)
 
 
 def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[float, float]:
@@ -153,5 +220,6 @@ def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
     return correction_params(invert(T_from) @ T_to)
 
 
-__all__ = ["AXES", "at_every_point", "correction_between", "correction_matrix", "displacement_px",
-           "local_optimum", "neighbour_fraction", "quality_report"]
+__all__ = ["AXES", "at_every_point", "axis_resolution", "correction_between", "correction_matrix",
+           "displacement_px", "local_optimum", "neighbour_fraction", "pixel_fd_step",
+           "quality_report"]

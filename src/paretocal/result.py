@@ -114,6 +114,9 @@ class CalibrationResult:
             "T_cam_lidar": self.T_cam_lidar.tolist(),
             "T_init": self.T_init.tolist(),
             "correction": self.correction,
+            # x, y, z of the correction (and of the intervals and the quality report) are in
+            # the LiDAR frame: T_cam_lidar = T_init @ D(correction).
+            "correction_frame": "lidar",
             "n_points": self.n_points,
             "objectives": self.objectives(),
             "decision": self.decision,

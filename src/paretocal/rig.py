@@ -207,11 +207,13 @@ def consistency(a: CalibrationResult, b: CalibrationResult, T_pair: np.ndarray,
                   else round(float(np.hypot(ha[ax], hb[ax])), 4)) for ax in AXES}
     checked = [ax for ax in AXES if limit[ax] is not None]
     beyond = [ax for ax in checked if abs(diff[ax]) > limit[ax]]
-    out = {"against": against, "difference": diff, "units": units, "limit_95": limit,
-           "axes_checked": checked}
+    out = {"against": against, "frame": "lidar", "difference": diff, "units": units,
+           "limit_95": limit, "axes_checked": checked}
     if not checked:
+        unjudged = [r for r in (a, b) if not (r.reliability or {}).get("intervals")]
         out.update(verdict="not checked",
-                   reason="neither run determines an axis to a 95 % interval")
+                   reason="a run judged unreliable has no intervals" if unjudged else
+                   "neither run determines an axis to a 95 % interval")
     elif beyond:
         out.update(verdict="inconsistent", reason="beyond the combined 95 % intervals on " +
                    ", ".join(f"{ax} ({diff[ax]:+.3g} {units[ax]}, limit {limit[ax]:.3g})"

@@ -315,6 +315,8 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
                                lidar=lidar)
             try:
+                if progress is not None:
+                    progress("writing", 0, 1)
                 publish_run(result, out, result.sweeps or frames, figures=figures, args=args)
             except KeyboardInterrupt:
                 raise Interrupted("writing the results", result.history[-1]["gen"],

@@ -15,8 +15,10 @@ agreement of the frames) and from two checks made for it after the calibration:
   explains every frame's edges clearly better than poses far away; images paired with clouds of
   another scene, or a scene without structure, do not.
 
-:func:`intervals` turns the jackknife standard errors and the pixel resolution of each axis into
-per-axis 95 % intervals, and names the axes the data do not determine.
+:func:`intervals` turns the jackknife standard errors, the image alignment the result reached
+(:func:`alignment_px`) and how far each axis can move for a pixel of displacement
+(:func:`pose_per_px`) into per-axis 95 % intervals, and names the axes the data do not
+determine.
 """
 
 from __future__ import annotations
@@ -29,10 +31,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .config import DecisionSettings, SearchSettings
-from .features.lidar import GROUP_NAMES
+from .camera import project
+from .features.lidar import GROUP_NAMES, SMOOTH
 from .features.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import AXES, TO_REPORT, at_every_point, displacement_px, local_optimum
+from .quality import (AXES, TO_REPORT, at_every_point, axis_resolution, displacement_px,
+                      local_optimum, pixel_fd_step, quality_report)
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -75,15 +79,8 @@ RESTART_P = 0.16
 CONTRAST_MIN_Z = 3.0
 #: ... and in at least this share of the frames the result must beat 95 % of the random poses.
 CONTRAST_MIN_FRAMES_CLEAR = 0.5
-#: 95 % two-sided normal quantile of the per-axis intervals.
+#: 95 % two-sided normal quantile of the jackknife part of the per-axis intervals.
 Z95 = 1.959964
-#: Localisation floor of the edge alignment (px) added to the jackknife spread in the
-#: intervals: an axis is known no better than the change that moves the projected points by
-#: this much on average. The jackknife sees the frames' disagreement, not a bias they share
-#: (the objective's optimum lies 1-2 px from KITTI's reference in yaw on 64 beams, about 4 px
-#: in pitch on 16 beams); 1 px covered yaw in 18 of 32 good trials, 2 px pitch in 30 of 32,
-#: 2.5 px every axis of every good trial (benchmarks/trust.py).
-RESOLUTION_PX = 2.5
 
 
 def restart_evidence(objective, search: SearchSettings, decision: DecisionSettings, n_min: int,
@@ -267,52 +264,139 @@ def start_text(start: dict) -> str:
 
 def resolution(objective, x_opt: np.ndarray) -> np.ndarray:
     """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
-    pixel on average at ``x_opt`` (7,); inf for an axis that does not move them."""
-    step = np.r_[[0.01] * 3, [0.1] * 3]
-    out = np.empty(6)
-    for a in range(6):
-        y = x_opt.copy()
-        y[a] += step[a]
-        px = displacement_px(objective, x_opt, y)
-        out[a] = step[a] / px if px > 0 else np.inf
-    return out
+    pixel on average at ``x_opt`` (7,), the other axes held; inf for an axis that does not move
+    them (:func:`paretocal.quality.axis_resolution`)."""
+    return axis_resolution(objective, x_opt)
 
 
-def intervals(quality: dict, res_per_px: np.ndarray, search: SearchSettings) -> dict:
+def alignment_px(objective, x_opt: np.ndarray) -> float:
+    """How closely the image edges and the LiDAR's edges agree at ``x_opt`` (7,): the median
+    distance in pixels from the edge feature points (depth and intensity edges) in view to the
+    nearest image edge, read from the distance transforms as the objective reads them
+    (bilinear), over the points within the truncation (the others match no edge). NaN when
+    no edge point matches."""
+    sc = objective.scene
+    T = objective.transforms(np.atleast_2d(x_opt))[0]
+    found = []
+    for f in range(sc.n_frames):
+        a, b = sc.point_start[f], sc.point_start[f + 1]
+        edge = sc.group[a:b] != SMOOTH
+        if not edge.any():
+            continue
+        uv, _, vis = project(sc.frame_xyz(f)[edge], sc.cameras[f], T, sc.z_min)
+        uv = uv[vis]
+        dt = sc.frame_dt(f)                                    # NaN on masked pixels
+        h, w = dt.shape
+        x0 = np.clip(uv[:, 0].astype(np.int64), 0, w - 2)
+        y0 = np.clip(uv[:, 1].astype(np.int64), 0, h - 2)
+        fx = np.clip(uv[:, 0] - x0, 0.0, 1.0)
+        fy = np.clip(uv[:, 1] - y0, 0.0, 1.0)
+        d = ((dt[y0, x0] * (1 - fx) + dt[y0, x0 + 1] * fx) * (1 - fy)
+             + (dt[y0 + 1, x0] * (1 - fx) + dt[y0 + 1, x0 + 1] * fx) * fy)
+        found.append(d[np.isfinite(d) & (d < sc.truncation_px)])
+    d = np.concatenate(found) if found else np.empty(0)
+    return float(np.median(d)) if len(d) else float("nan")
+
+
+def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
+    """Per axis (m, m, m, deg, deg, deg), the largest change of that axis among the pose
+    changes at ``x_opt`` (7,) that move the feature points in view by one pixel rms, the other
+    axes free to compensate: ``sqrt(diag(M^-1))`` with ``M`` the mean over the points of
+    ``J_p^T J_p`` (``J_p``: the 2 x 6 pixel Jacobian of point p, by finite differences). It
+    exceeds the one-axis :func:`resolution` where axes trade against each other (camera height
+    against pitch); inf for an axis the points do not pin down."""
+    sc = objective.scene
+    eps = np.r_[[1e-4] * 3, [1e-3] * 3]                        # m, deg: far below a pixel
+    X = np.tile(np.asarray(x_opt, dtype=np.float64), (7, 1))
+    X[1:, :6] += np.diag(eps)
+    T = objective.transforms(X)
+    M, count = np.zeros((6, 6)), 0
+    for f in range(sc.n_frames):
+        pts = sc.frame_xyz(f)
+        uv0, _, vis = project(pts, sc.cameras[f], T[0], sc.z_min)
+        if not vis.any():
+            continue
+        uv, _, _ = project(pts[vis], sc.cameras[f], T[1:], sc.z_min)      # (6, m, 2)
+        J = (uv - uv0[vis][None]) / eps[:, None, None]
+        J = np.where(np.isfinite(J), J, 0.0)
+        M += np.einsum("amk,bmk->ab", J, J)
+        count += int(vis.sum())
+    if count == 0:
+        return np.full(6, np.inf)
+    w, V = np.linalg.eigh(M / count)
+    null = w <= 1e-12 * max(w.max(), 1e-300)
+    with np.errstate(divide="ignore"):
+        inv = np.where(null, np.inf, 1.0 / np.where(null, 1.0, w))
+    var = np.where(V ** 2 > 1e-12, V ** 2 * inv[None, :], 0.0).sum(axis=1)
+    return np.sqrt(var)
+
+
+def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: SearchSettings,
+              res_per_px: np.ndarray | None = None) -> dict:
     """Per-axis 95 % intervals of the correction (report units: cm and deg).
 
-    The half-width combines the frames' disagreement (jackknife standard error) with the edge
-    localisation floor (:data:`RESOLUTION_PX` times the axis's pixel resolution): half =
-    Z95 * sqrt(se^2 + (RESOLUTION_PX * res)^2). An axis whose half-width exceeds the stated
-    initial error, or that has no jackknife (one frame), is *not determined* by the data.
+    Two parts, combined in quadrature: the frames' disagreement, ``Z95`` jackknife standard
+    errors (``quality["jackknife_se"]``); and what no agreement among frames can show, a bias
+    they all share (the LiDAR's edges and the image's are not the same lines, a reference or
+    intrinsics off by a constant image offset): the result is taken to be known to within the
+    image alignment it reached, ``align_px`` (:func:`alignment_px`, measured at the result),
+    on any combination of axes, so each axis is bounded by ``align_px * per_px`` (the largest
+    change of that axis among the poses that move the points by that much rms,
+    :func:`pose_per_px`). half = sqrt((Z95 se)^2 + (align_px per_px)^2). An axis whose
+    half-width exceeds the stated initial error, or that has no jackknife (one frame), is *not
+    determined* by the data.
+
+    Parameters
+    ----------
+    quality : dict
+        The quality report (``jackknife_se`` in cm and deg).
+    per_px : ndarray, shape (6,)
+        :func:`pose_per_px` (m and deg per pixel).
+    align_px : float
+    search : SearchSettings
+        Its stated initial error bounds a determined axis.
+    res_per_px : ndarray, shape (6,), optional
+        :func:`resolution`, reported beside.
 
     Returns
     -------
     dict
-        ``half_width`` per axis (None when not determined), ``determined`` per axis,
-        ``units``, ``undetermined`` (list of axis names) and ``resolution_per_px`` (report
-        units per pixel). The true extrinsic lies, per axis, within
-        ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width`` (the search's correction axes:
-        translation in the LiDAR frame, ZYX angles).
+        ``frame`` (``"lidar"``: the correction's axes), ``units``, ``jackknife_se`` (as
+        used, cm and deg), ``half_width`` per axis
+        (None when not determined), ``determined`` per axis, ``undetermined`` (list of axis
+        names), ``alignment_px``, ``per_px`` (report units per pixel rms) and
+        ``resolution_per_px`` (report units per pixel, one axis moved). The true extrinsic
+        lies, per axis, within ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width``.
     """
     se = np.array([(quality.get("jackknife_se") or {}).get(a, np.nan) for a in AXES], float)
-    res = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
-    half = Z95 * np.sqrt(se ** 2 + (RESOLUTION_PX * res) ** 2)
+    m = np.asarray(per_px, dtype=np.float64) * TO_REPORT
+    half = np.sqrt((Z95 * se) ** 2 + (align_px * m) ** 2)
     s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
-    return {"units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
-            "half_width": {a: (round(float(h), 4) if k else None)
-                           for a, h, k in zip(AXES, half, ok)},
-            "determined": {a: bool(k) for a, k in zip(AXES, ok)},
-            "undetermined": [a for a, k in zip(AXES, ok) if not k],
-            "resolution_per_px": {a: round(float(v), 5) for a, v in zip(AXES, res)}}
+    out = {"frame": "lidar", "units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
+           "jackknife_se": {a: (round(float(v), 5) if np.isfinite(v) else None)
+                            for a, v in zip(AXES, se)},
+           "half_width": {a: (round(float(h), 4) if k else None)
+                          for a, h, k in zip(AXES, half, ok)},
+           "determined": {a: bool(k) for a, k in zip(AXES, ok)},
+           "undetermined": [a for a, k in zip(AXES, ok) if not k],
+           "alignment_px": None if not np.isfinite(align_px) else round(float(align_px), 4),
+           "per_px": {a: (round(float(v), 5) if np.isfinite(v) else None)
+                      for a, v in zip(AXES, m)}}
+    if res_per_px is not None:
+        r = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
+        out["resolution_per_px"] = {a: (round(float(v), 5) if np.isfinite(v) else None)
+                                    for a, v in zip(AXES, r)}
+    return out
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                     quality: dict) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
-    the restart(s), the image-cloud agreement and the intervals (see the module docstring)."""
+    the restart(s), the image-cloud agreement and the intervals (see the module docstring).
+    ``quality`` is the run's quality report at the result; the intervals use their own
+    jackknife, at the result's local optimum."""
     restart = None
     if settings.decision.restarts > 0:
         restart = restart_evidence(objective, settings.search, settings.decision, n_min,
@@ -320,9 +404,15 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
         x_opt = np.asarray(restart.pop("result_optimum"))
     else:
         x_opt = local_optimum(objective, x)
+    # The frames' disagreement about the optimum, linearised where the objective's gradient
+    # vanishes: from the result itself (up to a pixel or two away) each frame's Newton step
+    # also carries its Hessian's differences times the remaining gradient.
+    at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
            "start": start_evidence(objective, x_opt),
-           "intervals": intervals(quality, resolution(objective, x_opt), settings.search)}
+           "intervals": intervals(at_opt, pose_per_px(objective, x_opt),
+                                  alignment_px(objective, x_opt), settings.search,
+                                  resolution(objective, x_opt))}
     if restart is not None:
         out["restart"] = restart
     return out
@@ -334,7 +424,9 @@ def reliability(result: "CalibrationResult") -> dict:
     ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
     unreliable: too few frames, few feature points in view at the chosen extrinsic, a
     correction stopped by a search bound (or a local optimum beyond it), or frames that
-    disagree (jackknife standard errors). Thresholds: the ``RELIABLE_*`` constants.
+    disagree (jackknife standard errors, those of the intervals at the result's local optimum
+    when the evidence has them), and the evidence's checks. Thresholds: the ``RELIABLE_*``
+    constants.
     """
     reasons = []
     n_frames = len(result.frames)
@@ -406,8 +498,15 @@ def reliability(result: "CalibrationResult") -> dict:
         reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
                        f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
                        "field or the LiDAR's pose (lidar_pose) in calib.yaml")
-    se = q.get("jackknife_se") or {}
-    units = q.get("units") or {}
+    ev = getattr(result, "evidence", None) or {}
+    # The frames' agreement as the intervals measure it, at the result's local optimum: at the
+    # result itself, a pixel or two away along the objective's flattest direction, each
+    # frame's gradient also carries its Hessian's difference from the mean times that offset
+    # (z 13.6 cm for a KITTI result 2.2 cm off). The quality report's without the evidence.
+    iv = ev.get("intervals") or {}
+    se = {a: v for a, v in (iv.get("jackknife_se") or q.get("jackknife_se") or {}).items()
+          if v is not None}
+    units = iv.get("units") or q.get("units") or {}
     se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
                  default=None)
     se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
@@ -418,7 +517,6 @@ def reliability(result: "CalibrationResult") -> dict:
     if loose:
         reasons.append(f"the frames disagree: jackknife standard error {', '.join(loose)} "
                        f"(limits {RELIABLE_MAX_SE_DEG:g} deg, {RELIABLE_MAX_SE_CM:g} cm)")
-    ev = getattr(result, "evidence", None) or {}
     rs = ev.get("restart") or {}
     if rs.get("disagrees"):
         r = next(r for r in rs["runs"] if r["distinct"])
@@ -443,10 +541,13 @@ def reliability(result: "CalibrationResult") -> dict:
                        "belongs to its cloud (same time, same camera), the intrinsics, and "
                        "that the scenes have edges both sensors see")
     iv = ev.get("intervals")
+    # Intervals hold only where nothing else casts doubt on the result: a wrong basin, frames
+    # that disagree or a result at a bound are all errors the intervals do not measure.
     return {
         "verdict": "unreliable" if reasons else "ok",
         "reasons": reasons,
-        "intervals": iv,
+        "intervals": None if reasons else iv,
+        "intervals_not_trusted": iv if reasons else None,
         "evidence": {k: v for k, v in ev.items() if k != "intervals"} or None,
         # How the start compares, said when the result is not trusted (keep the start?).
         "start": ev.get("start") if reasons else None,

@@ -155,7 +155,7 @@ def _verdict_banner(result) -> str:
                                             for r in rel.get("reasons", [])) + "</ul>"
     head = verdict_text(rel) if ok else "UNRELIABLE: do not use this result as it is"
     iv = interval_text(rel)
-    iv = "" if iv is None else (f'<div class="intervals">95 % intervals of the correction: '
+    iv = "" if iv is None else (f'<div class="intervals">95 % intervals per axis (LiDAR frame): '
                                 f"{html.escape(iv)}</div>")
     return (f'<div id="verdict" class="verdict {"ok" if ok else "unreliable"}">'
             f"{html.escape(head)}{items}{iv}</div>")
