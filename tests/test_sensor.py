@@ -99,10 +99,11 @@ def test_aimotive_pose_from_the_sweep(data):
     assert angle < 0.05 and offset < 0.02
 
 
-@pytest.mark.parametrize("seed", [5, 8])
+@pytest.mark.parametrize("seed", [1, 14])
 def test_an_unlucky_subsample_is_retried(raw_frames, seed):
-    # Frame 8 in firing order: with these seeds the first subsample centres the ground rings
-    # wrongly (61 % and 53 % of the returns explained); the retry finds the pose.
+    # Frame 8 in firing order: with these seeds the first subsample leaves the axis 0.16-0.17
+    # deg off (66 % and 58 % of the returns explained); the retry finds the pose. (2 of seeds
+    # 0-19 need the retry, all 20 are found.)
     w = to_vehicle_frame(firing_order(kitti_truth(raw_frames[8].points)))
     est = estimate_sensor_pose(w.points, rng=seed)
     assert est.ok
