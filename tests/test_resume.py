@@ -296,6 +296,47 @@ def test_an_interrupt_swallowed_by_library_code_still_stops_the_run(
     assert not (run / "result.json").exists()
 
 
+@pytest.mark.parametrize("module, name, words", [
+    ("pipeline", "sweep_rings", "recovering the LiDAR rings"),
+    ("pipeline", "coarse_seeds", "scoring the seed grid"),
+], ids=["rings", "seed grid"])
+def test_an_interrupt_wrapped_in_a_system_error_is_an_interrupt(
+        tmp_path, raw_date, capsys, monkeypatch, module, name, words):
+    """A SIGINT landing while numba dispatches a compiled function (found 1.5 s into a real
+    run, in the rings' ``_label_medians``) leaves the call as SystemError ("returned a result
+    with an exception set"): exit 130 with the phase's one line, not exit 1 "unexpected
+    error"."""
+    import importlib
+    import signal
+
+    from paretocal.cli import _STOP
+
+    mod = importlib.import_module(f"paretocal.{module}")
+
+    def wrapped(*args, **kwargs):
+        try:
+            _STOP(signal.SIGINT, None)             # what a Ctrl-C here does
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher(<function f>) returned a result with an "
+                              "exception set") from exc
+    monkeypatch.setattr(mod, name, wrapped)
+    run = tmp_path / "run"
+    assert main(["calibrate", str(raw_date), "--out", str(run)] + PHASE_CLI) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("paretocal: interrupted while"), err
+    assert f"while {words};" in err[0], err
+    assert not (run / "result.json").exists()
+
+
+def test_a_system_error_without_a_stop_is_still_an_error(tmp_path, raw_date, capsys,
+                                                         monkeypatch):
+    def broken(*args, **kwargs):
+        raise SystemError("a real bug")
+    monkeypatch.setattr("paretocal.pipeline.coarse_seeds", broken)
+    assert main(["calibrate", str(raw_date), "--out", str(tmp_path / "run")] + PHASE_CLI) == 1
+    assert "unexpected error: SystemError: a real bug" in capsys.readouterr().err
+
+
 def test_a_stop_raised_in_a_callback_from_c_prints_nothing():
     """A SIGINT landing in a callback from C (numba's compiler cache notifies through ctypes)
     cannot propagate; Python would print it with a traceback. The command line's hook keeps

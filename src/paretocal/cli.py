@@ -942,6 +942,10 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
             print(f"paretocal: error: {' '.join(text.split())}", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - the last line of defence
+        if STOP.requested:
+            # The user's stop, wrapped by code it interrupted (a compiled function's
+            # dispatch turns it into SystemError): an interrupt, not an error.
+            return _interrupted(name)
         if verbose:
             import traceback
 

@@ -182,6 +182,14 @@ def _timed(timings: dict[str, float], name: str, progress=None):
     except KeyboardInterrupt:
         STOP.clear()                              # taken
         raise Interrupted(PHASES[name]) from None
+    except SystemError:
+        # A stop that lands while a compiled function is being dispatched comes out of the
+        # call as SystemError ("... returned a result with an exception set"), the interrupt
+        # inside it: still the user's stop.
+        if not STOP.requested:
+            raise
+        STOP.clear()
+        raise Interrupted(PHASES[name]) from None
     finally:
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
