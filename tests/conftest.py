@@ -52,6 +52,18 @@ def object_dir(data) -> Path:
     return data / "kitti_object" / "training"
 
 
+@pytest.fixture(scope="session")
+def pandaset_00(data):
+    """The points (N, 4) of PandaSet's frame 00, in its vehicle-like frame L: the car stands in a
+    traffic jam, the road holds about 15 % of the returns within 40 m."""
+    from paretocal.io import load_frames
+
+    root = data / "pandaset" / "front"
+    if not (root / "calib.yaml").is_file():
+        pytest.skip("PandaSet sample not present")
+    return load_frames(root, "0")[0].points
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -4,7 +4,6 @@ pose its README gives)."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from paretocal.features.rings import MIN_PURITY, recover_rings
 from paretocal.geometry import invert, transform_points
@@ -27,16 +26,6 @@ def _located_pose() -> np.ndarray:
     P[:3, :3] = np.column_stack([x, np.cross(z, x), z])
     P[:3, 3] = (0.000, 0.779, 1.859)
     return P
-
-
-@pytest.fixture(scope="module")
-def pandaset_00(data):
-    from paretocal.io import load_frames
-
-    root = data / "pandaset" / "front"
-    if not (root / "calib.yaml").is_file():
-        pytest.skip("PandaSet sample not present")
-    return load_frames(root, "0")[0].points
 
 
 def test_pandaset_rings_about_the_readme_pose(pandaset_00):

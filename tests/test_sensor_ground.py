@@ -53,18 +53,6 @@ def test_the_road_is_found_when_it_holds_a_tenth_of_the_returns(seed):
     assert abs(offset) < 0.5 * GROUND_TOL_M, offset
 
 
-@pytest.fixture(scope="module")
-def pandaset_00(data):
-    from paretocal.io import load_frames
-
-    root = data / "pandaset" / "front"
-    if not (root / "calib.yaml").is_file():
-        pytest.skip("PandaSet sample not present")
-    # Frame 00: the car stands in a traffic jam; the road holds 15 % of the returns within
-    # 40 m, the cars' roofs and facades most of the rest.
-    return load_frames(root, "0")[0].points
-
-
 @pytest.mark.parametrize("seed", [0, 1, 3])
 def test_pandaset_pose_in_a_traffic_jam(pandaset_00, seed):
     # These seeds took the queueing cars' roofs for the ground with 300 RANSAC planes.
