@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import signal
+import sys
 from pathlib import Path
 
 import cv2
@@ -110,3 +112,14 @@ def default_sigint() -> None:
     background (``nohup``, ``&`` in a script) has SIGINT ignored, children inherit that and
     paretocal rightly keeps it; the child starts with the default action, as from a terminal."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def load_benchmark(name: str):
+    """The module ``benchmarks/<name>.py``, imported by path (the benchmarks are scripts, not a
+    package) and registered as ``<name>_benchmark`` so that its dataclasses resolve."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"{name}_benchmark", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import yaml
@@ -15,17 +11,12 @@ from paretocal.geometry import correction_matrix, invert
 from paretocal.io import detect_source, load_frames
 from paretocal.io.readers import read_mapping
 
-ROOT = Path(__file__).resolve().parents[1]
+from .helpers import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def acc():
-    spec = importlib.util.spec_from_file_location("accuracy_benchmark",
-                                                  ROOT / "benchmarks" / "accuracy.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("accuracy")
 
 
 @pytest.fixture(scope="module")

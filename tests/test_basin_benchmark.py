@@ -2,27 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from paretocal.config import Settings
 from paretocal.geometry import correction_matrix
 
-ROOT = Path(__file__).resolve().parents[1]
+from .helpers import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def basin_bench():
-    spec = importlib.util.spec_from_file_location("basin_benchmark",
-                                                  ROOT / "benchmarks" / "basin.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("basin")
 
 
 def test_the_basin_is_at_the_reference_and_not_at_a_pose_beside_it(basin_bench, raw_frames):

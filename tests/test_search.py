@@ -6,6 +6,8 @@ from paretocal.search import front_of, run_nsga2
 from paretocal.search.polish import fd_gradient_hessian, newton_polish, polish
 from paretocal.search.seeding import grid_seeds, rotation_grid
 
+from .helpers import load_benchmark
+
 
 def _quadratic(center, H):
     """A convex quadratic in the six pose variables with correlated axes (a diagonal valley)."""
@@ -114,14 +116,7 @@ class TestEngines:
 
     @staticmethod
     def _pymoo():
-        import importlib.util
-        from pathlib import Path
-
-        path = Path(__file__).parents[1] / "benchmarks" / "pymoo_nsga.py"
-        spec = importlib.util.spec_from_file_location("pymoo_nsga", path)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
+        return load_benchmark("pymoo_nsga")
 
     def _settings(self, seed=3):
         return SearchSettings(pop=60, gens=25, seed=seed, bound_t_m=3, bound_r_deg=3)
