@@ -8,9 +8,9 @@ import pytest
 
 from paretocal.config import Settings
 from paretocal.stage import Stage
-from paretocal.quality import AXES
+from paretocal.quality import AXES, axis_resolution
 from paretocal.verdict import (Z95, alignment_px, contrast_evidence, interval_text, intervals,
-                               pose_per_px, resolution, restart_evidence)
+                               pose_per_px, restart_evidence)
 
 SETTINGS = Settings().replace(search={"pop": 60, "gens": 30},
                               decision={"restarts": 1, "restart_share": 1.0})
@@ -112,7 +112,7 @@ def test_resolution_is_the_step_that_moves_points_one_pixel(stage):
     from paretocal.quality import displacement_px
 
     x = _full(stage, np.zeros(6))
-    res = resolution(stage.objective, x)
+    res = axis_resolution(stage.objective, x)
     assert np.all(np.isfinite(res)) and np.all(res > 0)
     # Moving one axis by its resolution moves the projected points by about one pixel.
     for a in (0, 3):
@@ -166,7 +166,7 @@ def test_pose_per_px_is_the_largest_move_of_an_axis_per_pixel_rms(stage):
 
     x = _full(stage, np.zeros(6))
     per = pose_per_px(stage.objective, x)
-    res = resolution(stage.objective, x)
+    res = axis_resolution(stage.objective, x)
     assert np.all(np.isfinite(per)) and np.all(per > 0)
     for a in (2, 3, 4):                                        # z, yaw, pitch
         others = [i for i in range(6) if i != a]
@@ -191,7 +191,7 @@ def test_alignment_is_the_median_distance_of_edge_points_to_image_edges(stage):
     x = local_optimum(stage.objective, _full(stage, np.zeros(6)))
     near = alignment_px(stage.objective, x)
     off = x.copy()
-    off[3] += 5 * resolution(stage.objective, x)[3]            # yaw: 5 px
+    off[3] += 5 * axis_resolution(stage.objective, x)[3]            # yaw: 5 px
     far = alignment_px(stage.objective, off)
     assert 0.5 < near < 3.0 and far > near + 0.3, (near, far)
 

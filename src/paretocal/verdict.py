@@ -262,13 +262,6 @@ def start_text(start: dict) -> str:
             "calibration is judged ok")
 
 
-def resolution(objective, x_opt: np.ndarray) -> np.ndarray:
-    """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
-    pixel on average at ``x_opt`` (7,), the other axes held; inf for an axis that does not move
-    them (:func:`paretocal.quality.axis_resolution`)."""
-    return axis_resolution(objective, x_opt)
-
-
 def alignment_px(objective, x_opt: np.ndarray) -> float:
     """How closely the image edges and the LiDAR's edges agree at ``x_opt`` (7,): the median
     distance in pixels from the edge feature points (depth and intensity edges) in view to the
@@ -303,8 +296,8 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
     changes at ``x_opt`` (7,) that move the feature points in view by one pixel rms, the other
     axes free to compensate: ``sqrt(diag(M^-1))`` with ``M`` the mean over the points of
     ``J_p^T J_p`` (``J_p``: the 2 x 6 pixel Jacobian of point p, by finite differences). It
-    exceeds the one-axis :func:`resolution` where axes trade against each other (camera height
-    against pitch); inf for an axis the points do not pin down."""
+    exceeds the one-axis :func:`~paretocal.quality.axis_resolution` where axes trade against
+    each other (camera height against pitch); inf for an axis the points do not pin down."""
     sc = objective.scene
     eps = np.r_[[1e-4] * 3, [1e-3] * 3]                        # m, deg: far below a pixel
     X = np.tile(np.asarray(x_opt, dtype=np.float64), (7, 1))
@@ -356,7 +349,7 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
     search : SearchSettings
         Its stated initial error bounds a determined axis.
     res_per_px : ndarray, shape (6,), optional
-        :func:`resolution`, reported beside.
+        :func:`~paretocal.quality.axis_resolution`, reported beside.
 
     Returns
     -------
@@ -412,7 +405,7 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
            "start": start_evidence(objective, x_opt),
            "intervals": intervals(at_opt, pose_per_px(objective, x_opt),
                                   alignment_px(objective, x_opt), settings.search,
-                                  resolution(objective, x_opt))}
+                                  axis_resolution(objective, x_opt))}
     if restart is not None:
         out["restart"] = restart
     return out
