@@ -566,8 +566,8 @@ def interval_record(rel: dict, T: np.ndarray, T_ref: np.ndarray) -> dict:
     return {"interval_error": {a: float(v) for a, v in zip(IV_AXES, d)},
             "half_width": (iv or {}).get("half_width"),
             "half_width_not_trusted": (untrusted or {}).get("half_width"),
-            "interval_parts": {k: parts.get(k) for k in ("alignment_px", "per_px",
-                                                          "jackknife_se")}}
+            "interval_parts": {k: parts.get(k) for k in ("alignment_px", "sampling_px",
+                                                          "per_px", "bias", "jackknife_se")}}
 
 
 def interval_figures(rows: list[dict], key: str = "half_width") -> dict | None:

@@ -728,6 +728,22 @@ def _fake_result(**over):
     ({"evidence": {"intervals": {"units": {"x": "cm", "z": "cm"},
                                  "jackknife_se": {"x": 0.3, "z": 11.0}}}},
      "the frames disagree: jackknife standard error z 11 cm"),
+    # Frames that agree on a pose the data fix only coarsely: the intervals say how coarsely.
+    ({"evidence": {"intervals": {"units": {"x": "cm", "y": "cm", "pitch": "deg"},
+                                 "half_width": {"x": 9.0, "y": 14.0, "pitch": 0.5},
+                                 "undetermined": [], "alignment_px": 1.7,
+                                 "sampling_px": [7.3, 6.8]}}},
+     "the data fix the result only to y +-14 cm (95 %; a usable calibration needs 10 cm and "
+     "1 deg); the LiDAR samples this camera's view coarsely (neighbouring returns 7.3 px "
+     "apart along a ring and 6.8 px between rings)"),
+    ({"evidence": {"intervals": {"units": {"x": "cm", "pitch": "deg"},
+                                 "half_width": {"x": 3.0, "pitch": 1.4},
+                                 "undetermined": ["z"], "alignment_px": 1.7,
+                                 "sampling_px": [2.0, 3.0]}}},
+     "the data fix the result only to pitch +-1.4 deg, z not at all (95 %"),
+    ({"evidence": {"intervals": {"units": {"x": "cm"}, "half_width": {"x": 9.9},
+                                 "undetermined": [], "alignment_px": 1.7,
+                                 "sampling_px": None}}}, None),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.verdict import reliability

@@ -193,3 +193,32 @@ def test_feature_counts_name_each_frame_and_the_noisy_ones(raw_frames):
     noise = feature_counts(mixed)["noise"]
     assert [n["frame"] for n in noise] == [f.name for f in frames]
     assert "3 laser rings" in noise[0]["reason"] and "40 %" in noise[1]["reason"]
+
+
+def test_sampling_px_is_the_lidars_step_seen_in_the_image():
+    """The box scene's LiDAR steps 0.2 deg in azimuth and 20/31 deg between rings; seen by a
+    500 px focal length that is 1.75 px and 5.6 px at the image centre and more towards the
+    borders (a pinhole magnifies by up to 1 / cos^2 of the angle off its axis, 1.4 in this
+    image's corners), in any storage order and from a vehicle frame alike."""
+    from paretocal.features.prepare import sampling_px
+    from paretocal.camera import Camera
+    from paretocal.geometry import invert
+
+    K, img, pts, T = box_scene(np.random.default_rng(0))
+    cam = Camera(K, img.shape[1], img.shape[0])
+    el = np.round(np.degrees(np.arctan2(pts[:, 2], np.hypot(pts[:, 0], pts[:, 1]))), 1)
+    levels = np.unique(el)
+    ring = len(levels) - 1 - np.searchsorted(levels, el)          # top first
+    s = sampling_px(pts, ring, cam, T)
+    want = 500.0 * np.radians([0.2, 20.0 / 31.0])
+    assert np.all(s >= want) and np.all(s < 1.15 * want)
+    perm = np.random.default_rng(1).permutation(len(pts))
+    np.testing.assert_allclose(sampling_px(pts[perm], ring[perm], cam, T), s, rtol=1e-9)
+    # The same sensor mounted in a vehicle frame: its pose maps the rays into that frame.
+    pose = np.eye(4)
+    pose[:3, 3] = [1.2, 0.3, 1.5]
+    T_vehicle = T @ invert(pose)
+    np.testing.assert_allclose(sampling_px(pts, ring, cam, T_vehicle, sensor_pose=pose), s,
+                               rtol=0.02)
+    # Nothing in view, or no rings: nothing measured.
+    assert sampling_px(pts, np.full(len(pts), -1), cam, T) is None

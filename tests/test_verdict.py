@@ -136,9 +136,24 @@ def test_intervals_combine_jackknife_and_alignment():
     assert text.startswith(f"x +-{h['x']:.2g} cm, y +-7.8 cm") and text.endswith(
         "not determined by the data: z, pitch")
     assert interval_text({}) is None
+    # A shared bias bounded per axis (the LiDAR's sampling) replaces alignment x per pixel.
+    bias = np.array([0.09, 0.0, 0.01, 0.0, 0.1, 0.6])                # m and deg
+    iv = intervals({"jackknife_se": se}, per_px, 1.5, Settings().search,
+                   sampling_px=np.array([7.0, 6.0]), bias=bias)
+    assert iv["half_width"]["x"] == pytest.approx(np.hypot(Z95 * 3.0, 9.0), rel=1e-4)
+    assert iv["half_width"]["roll"] == pytest.approx(0.6, rel=1e-4)
+    assert iv["sampling_px"] == [7.0, 6.0] and iv["bias"]["x"] == 9.0
     # Without any matched edge the alignment is unknown: nothing is determined.
     assert intervals({"jackknife_se": se}, per_px, float("nan"),
                      Settings().search)["undetermined"] == list(AXES)
+
+
+def test_the_bias_tolerance_is_the_alignment_or_half_the_sampling_step():
+    from paretocal.verdict import bias_tolerance_px
+
+    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 5.6])), [1.6, 2.8])
+    np.testing.assert_allclose(bias_tolerance_px(1.6, None), [1.6, 1.6])
+    assert np.isnan(bias_tolerance_px(float("nan"), np.array([2.5, 5.6]))).all()
 
 
 def _rms_px(objective, x, d):
@@ -180,6 +195,20 @@ def test_pose_per_px_is_the_largest_move_of_an_axis_per_pixel_rms(stage):
         rms = np.sqrt(np.mean(fit.fun ** 2) * 2)               # per point: |du, dv|
         assert rms == pytest.approx(0.1, rel=0.05), (AXES[a], rms)
     assert per[2] > 1.5 * res[2]                               # z trades against pitch
+    # With a tolerance per image direction (u, v): the same extent, the displacements
+    # measured in units of that tolerance.
+    tol = np.array([2.0, 5.0])
+    per_t = pose_per_px(stage.objective, x, tol)
+    for a in (2, 4):
+        others = [i for i in range(6) if i != a]
+
+        def disp_w(p, a=a):
+            d = np.insert(p, a, 0.1 * per_t[a])
+            return (_rms_px(stage.objective, x, d).reshape(-1, 2) / tol).ravel()
+        fit = least_squares(disp_w, np.zeros(5), x_scale=per_t[others], diff_step=1e-3)
+        rms = np.sqrt(np.mean(fit.fun ** 2) * 2)
+        assert rms == pytest.approx(0.1, rel=0.05), (AXES[a], rms)
+    assert per_t[4] > per[4]                                   # pitch: v is looser
 
 
 def test_alignment_is_the_median_distance_of_edge_points_to_image_edges(stage):

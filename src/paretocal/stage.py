@@ -195,6 +195,13 @@ class Stage:
                                               ucb_k=settings.ucb_k)
 
 
+    def sampling_px(self) -> np.ndarray | None:
+        """The LiDAR's sampling step in the image, (2,) px along a ring and between rings:
+        the median over the frames that measured it (None when none did)."""
+        got = [f.sampling_px for f in self.feats if f.sampling_px is not None]
+        return np.median(np.array(got), axis=0) if got else None
+
+
 def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int) -> CostModel:
     """The cost model of ``scene`` on this machine: measured once, then read from a cache.
 

@@ -58,6 +58,11 @@ RELIABLE_BOUND_MARGIN = 0.01
 #: the pose by more than a usable calibration allows (1 deg moves a point 20 m away by 35 cm).
 RELIABLE_MAX_SE_DEG = 1.0
 RELIABLE_MAX_SE_CM = 10.0
+#: A 95 % interval wider than a usable calibration allows (the same limits: the accuracy a
+#: result must reach to be called right) means the data cannot vouch for the result, however
+#: well the frames agree.
+RELIABLE_MAX_HALF_DEG = 1.0
+RELIABLE_MAX_HALF_CM = 10.0
 #: A sweep skewed by more than this (m) and not de-skewed misplaces points by up to half of
 #: it: the same scale as the translation error a usable calibration allows.
 MAX_UNCOMPENSATED_SKEW_M = 0.1
@@ -291,13 +296,18 @@ def alignment_px(objective, x_opt: np.ndarray) -> float:
     return float(np.median(d)) if len(d) else float("nan")
 
 
-def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
+def pose_per_px(objective, x_opt: np.ndarray, tolerance_px=(1.0, 1.0)) -> np.ndarray:
     """Per axis (m, m, m, deg, deg, deg), the largest change of that axis among the pose
     changes at ``x_opt`` (7,) that move the feature points in view by one pixel rms, the other
     axes free to compensate: ``sqrt(diag(M^-1))`` with ``M`` the mean over the points of
     ``J_p^T J_p`` (``J_p``: the 2 x 6 pixel Jacobian of point p, by finite differences). It
     exceeds the one-axis :func:`~paretocal.quality.axis_resolution` where axes trade against
-    each other (camera height against pitch); inf for an axis the points do not pin down."""
+    each other (camera height against pitch); inf for an axis the points do not pin down.
+
+    ``tolerance_px`` (u, v) scales the image's two directions: the poses then move the points
+    by at most ``tolerance_px`` rms in each (one pixel each by default), and the result is in
+    axis units for that displacement rather than per pixel."""
+    t = np.asarray(tolerance_px, dtype=np.float64)
     sc = objective.scene
     eps = np.r_[[1e-4] * 3, [1e-3] * 3]                        # m, deg: far below a pixel
     X = np.tile(np.asarray(x_opt, dtype=np.float64), (7, 1))
@@ -311,7 +321,7 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
             continue
         uv, _, _ = project(pts[vis], sc.cameras[f], T[1:], sc.z_min)      # (6, m, 2)
         J = (uv - uv0[vis][None]) / eps[:, None, None]
-        J = np.where(np.isfinite(J), J, 0.0)
+        J = np.where(np.isfinite(J), J, 0.0) / t
         M += np.einsum("amk,bmk->ab", J, J)
         count += int(vis.sum())
     if count == 0:
@@ -324,20 +334,35 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
     return np.sqrt(var)
 
 
+def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> np.ndarray:
+    """How far, in pixels along the image's u and v, a bias that every frame shares may move
+    the LiDAR's edges from the image's (shape (2,)): the image alignment the result reached,
+    ``align_px``, and no less than half the LiDAR's sampling step in that direction,
+    ``sampling / 2`` (:func:`~paretocal.features.prepare.sampling_px`: an edge lies somewhere
+    between two returns, and every frame places it by the same rule)."""
+    t = np.full(2, float(align_px))
+    if sampling is not None and np.all(np.isfinite(sampling)):
+        t = np.maximum(t, 0.5 * np.asarray(sampling, dtype=np.float64))
+    return t
+
+
 def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: SearchSettings,
-              res_per_px: np.ndarray | None = None) -> dict:
+              res_per_px: np.ndarray | None = None, *, sampling_px: np.ndarray | None = None,
+              bias: np.ndarray | None = None) -> dict:
     """Per-axis 95 % intervals of the correction (report units: cm and deg).
 
     Two parts, combined in quadrature: the frames' disagreement, ``Z95`` jackknife standard
     errors (``quality["jackknife_se"]``); and what no agreement among frames can show, a bias
     they all share (the LiDAR's edges and the image's are not the same lines, a reference or
-    intrinsics off by a constant image offset): the result is taken to be known to within the
-    image alignment it reached, ``align_px`` (:func:`alignment_px`, measured at the result),
-    on any combination of axes, so each axis is bounded by ``align_px * per_px`` (the largest
-    change of that axis among the poses that move the points by that much rms,
-    :func:`pose_per_px`). half = sqrt((Z95 se)^2 + (align_px per_px)^2). An axis whose
-    half-width exceeds the stated initial error, or that has no jackknife (one frame), is *not
-    determined* by the data.
+    intrinsics off by a constant image offset, the LiDAR placing every edge between its
+    returns by one rule): the result is taken to be known to within the image alignment it
+    reached, ``align_px`` (:func:`alignment_px`, measured at the result), and no better than
+    half the LiDAR's sampling step in each image direction (:func:`bias_tolerance_px`), on
+    any combination of axes. ``bias`` is that bound per axis (:func:`pose_per_px` with that
+    tolerance); without it, ``align_px * per_px`` (the largest change of that axis among the
+    poses that move the points by that much rms). half = sqrt((Z95 se)^2 + bias^2). An axis
+    whose half-width exceeds the stated initial error, or that has no jackknife (one frame),
+    is *not determined* by the data.
 
     Parameters
     ----------
@@ -350,6 +375,10 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
         Its stated initial error bounds a determined axis.
     res_per_px : ndarray, shape (6,), optional
         :func:`~paretocal.quality.axis_resolution`, reported beside.
+    sampling_px : ndarray, shape (2,), optional
+        The LiDAR's sampling step in the image (u, v), reported beside.
+    bias : ndarray, shape (6,), optional
+        The shared bias's bound per axis (m and deg).
 
     Returns
     -------
@@ -357,39 +386,46 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
         ``frame`` (``"lidar"``: the correction's axes), ``units``, ``jackknife_se`` (as
         used, cm and deg), ``half_width`` per axis
         (None when not determined), ``determined`` per axis, ``undetermined`` (list of axis
-        names), ``alignment_px``, ``per_px`` (report units per pixel rms) and
-        ``resolution_per_px`` (report units per pixel, one axis moved). The true extrinsic
-        lies, per axis, within ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width``.
+        names), ``alignment_px``, ``sampling_px`` (u, v), ``per_px`` (report units per pixel
+        rms), ``bias`` (report units) and ``resolution_per_px`` (report units per pixel, one
+        axis moved). The true extrinsic lies, per axis, within ``T_cam_lidar @ D(d)`` for
+        ``|d_axis| <= half_width``.
     """
     se = np.array([(quality.get("jackknife_se") or {}).get(a, np.nan) for a in AXES], float)
     m = np.asarray(per_px, dtype=np.float64) * TO_REPORT
-    half = np.sqrt((Z95 * se) ** 2 + (align_px * m) ** 2)
+    b = (align_px * m if bias is None else np.asarray(bias, dtype=np.float64) * TO_REPORT)
+    if not np.isfinite(align_px):
+        b = np.full(6, np.nan)
+    half = np.sqrt((Z95 * se) ** 2 + b ** 2)
     s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
+    rnd = lambda v, k: round(float(v), k) if np.isfinite(v) else None  # noqa: E731
     out = {"frame": "lidar", "units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
-           "jackknife_se": {a: (round(float(v), 5) if np.isfinite(v) else None)
-                            for a, v in zip(AXES, se)},
+           "jackknife_se": {a: rnd(v, 5) for a, v in zip(AXES, se)},
            "half_width": {a: (round(float(h), 4) if k else None)
                           for a, h, k in zip(AXES, half, ok)},
            "determined": {a: bool(k) for a, k in zip(AXES, ok)},
            "undetermined": [a for a, k in zip(AXES, ok) if not k],
            "alignment_px": None if not np.isfinite(align_px) else round(float(align_px), 4),
-           "per_px": {a: (round(float(v), 5) if np.isfinite(v) else None)
-                      for a, v in zip(AXES, m)}}
+           "sampling_px": (None if sampling_px is None
+                           else [rnd(v, 3) for v in np.asarray(sampling_px, float)]),
+           "per_px": {a: rnd(v, 5) for a, v in zip(AXES, m)},
+           "bias": {a: rnd(v, 5) for a, v in zip(AXES, b)}}
     if res_per_px is not None:
         r = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
-        out["resolution_per_px"] = {a: (round(float(v), 5) if np.isfinite(v) else None)
-                                    for a, v in zip(AXES, r)}
+        out["resolution_per_px"] = {a: rnd(v, 5) for a, v in zip(AXES, r)}
     return out
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                    quality: dict) -> dict:
+                    quality: dict, sampling: np.ndarray | None = None) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring).
     ``quality`` is the run's quality report at the result; the intervals use their own
-    jackknife, at the result's local optimum."""
+    jackknife, at the result's local optimum. ``sampling`` (2,): the LiDAR's sampling step
+    in the image, px along u and v (:func:`~paretocal.features.prepare.sampling_px`, the
+    median over the frames), which bounds how well any frame can place an edge."""
     restart = None
     if settings.decision.restarts > 0:
         restart = restart_evidence(objective, settings.search, settings.decision, n_min,
@@ -401,11 +437,15 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     # vanishes: from the result itself (up to a pixel or two away) each frame's Newton step
     # also carries its Hessian's differences times the remaining gradient.
     at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
+    align = alignment_px(objective, x_opt)
+    tol = bias_tolerance_px(align, sampling)
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
            "start": start_evidence(objective, x_opt),
-           "intervals": intervals(at_opt, pose_per_px(objective, x_opt),
-                                  alignment_px(objective, x_opt), settings.search,
-                                  axis_resolution(objective, x_opt))}
+           "intervals": intervals(at_opt, pose_per_px(objective, x_opt), align,
+                                  settings.search, axis_resolution(objective, x_opt),
+                                  sampling_px=sampling,
+                                  bias=(pose_per_px(objective, x_opt, tol)
+                                        if np.all(np.isfinite(tol)) else None))}
     if restart is not None:
         out["restart"] = restart
     return out
@@ -534,6 +574,10 @@ def reliability(result: "CalibrationResult") -> dict:
                        "belongs to its cloud (same time, same camera), the intrinsics, and "
                        "that the scenes have edges both sensors see")
     iv = ev.get("intervals")
+    if iv and not reasons:
+        wide = _imprecise(iv)
+        if wide:
+            reasons.append(wide)
     # Intervals hold only where nothing else casts doubt on the result: a wrong basin, frames
     # that disagree or a result at a bound are all errors the intervals do not measure.
     return {
@@ -550,6 +594,28 @@ def reliability(result: "CalibrationResult") -> dict:
         "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
         "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
     }
+
+
+def _imprecise(iv: dict) -> str | None:
+    """The reason to distrust a result whose intervals are wider than a usable calibration
+    allows (:data:`RELIABLE_MAX_HALF_CM`, :data:`RELIABLE_MAX_HALF_DEG`), or None."""
+    limit = {"cm": RELIABLE_MAX_HALF_CM, "deg": RELIABLE_MAX_HALF_DEG}
+    units = iv.get("units") or {}
+    wide = [f"{a} +-{h:.2g} {units[a]}" for a, h in (iv.get("half_width") or {}).items()
+            if h is not None and units.get(a) in limit and h > limit[units[a]]]
+    loose = wide + [f"{a} not at all" for a in iv.get("undetermined") or []]
+    if not loose:
+        return None
+    why = ""
+    samp, align = iv.get("sampling_px"), iv.get("alignment_px")
+    if samp and align is not None and None not in samp and 0.5 * max(samp) > align:
+        why = (f"; the LiDAR samples this camera's view coarsely (neighbouring returns "
+               f"{samp[0]:.2g} px apart along a ring and {samp[1]:.2g} px between rings), so "
+               "no frame places an edge closer than half that")
+    return (f"the data fix the result only to {', '.join(loose)} (95 %; a usable calibration "
+            f"needs {RELIABLE_MAX_HALF_CM:g} cm and {RELIABLE_MAX_HALF_DEG:g} deg){why}: add "
+            "frames with structure near the rig and across the whole image (poles, building "
+            "corners, cars at several distances), or keep the start if it was measured better")
 
 
 def verdict_text(rel: dict) -> str:

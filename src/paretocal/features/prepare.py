@@ -44,6 +44,10 @@ class FrameFeatures:
     n_rings : int
     rings : dict, optional
         :meth:`Rings.summary` of the sweep (method, count, purity, notes).
+    sampling_px : ndarray, shape (2,), optional
+        How finely the LiDAR samples this camera's view (:func:`sampling_px`): the image
+        distance in pixels between neighbouring returns along a ring and between neighbouring
+        rings.
     """
 
     name: str
@@ -54,6 +58,7 @@ class FrameFeatures:
     weight: np.ndarray
     n_rings: int
     rings: dict | None = None
+    sampling_px: np.ndarray | None = None
 
     def split(self, holdout: float) -> tuple["FrameFeatures", "FrameFeatures"]:
         """The search part (the first points of the order) and a held-out tail.
@@ -64,9 +69,11 @@ class FrameFeatures:
         m = len(self.xyz)
         cut = m - int(round(holdout * m))
         head = FrameFeatures(self.name, self.camera, self.image, self.xyz[:cut],
-                             self.group[:cut], self.weight[:cut], self.n_rings, self.rings)
+                             self.group[:cut], self.weight[:cut], self.n_rings, self.rings,
+                             self.sampling_px)
         tail = FrameFeatures(self.name, self.camera, self.image, self.xyz[cut:],
-                             self.group[cut:], self.weight[cut:], self.n_rings, self.rings)
+                             self.group[cut:], self.weight[cut:], self.n_rings, self.rings,
+                             self.sampling_px)
         return head, tail
 
     def counts(self) -> dict[str, int]:
@@ -186,8 +193,78 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
     cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
     order = stratified_order(group, cv * gx + cu, rng)
+    sampling = sampling_px(pts_s[near], rings.ring[near], frame.camera, T_init,
+                           frame.sensor_pose, features.z_min)
     return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], weight[order],
-                         rings.n_rings, rings.summary())
+                         rings.n_rings, rings.summary(), sampling)
+
+
+#: Rays are projected from this far (m): the image distance between neighbouring returns is
+#: then that of their directions, whatever their ranges (translation does not matter at 1 km).
+SAMPLING_RAY_M = 1000.0
+
+
+def sampling_px(points: np.ndarray, ring: np.ndarray, camera: Camera, T: np.ndarray,
+                sensor_pose: np.ndarray | None = None, z_min: float = 0.1) -> np.ndarray | None:
+    """How finely the LiDAR samples the camera's view, in image pixels.
+
+    An edge between two returns lies somewhere between their rays: the LiDAR cannot place it
+    closer than this, in every frame alike, so it bounds the alignment a calibration from
+    this rig can vouch for (:func:`paretocal.verdict.intervals`). Measured on the rays, not
+    taken from a data sheet, so it holds for any beam layout, storage order and lens model.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3+)
+        Returns in the LiDAR sensor's frame (origin on the spinning axis).
+    ring : ndarray, shape (N,)
+        Ring per return (-1: none), rings numbered from the top.
+    camera, T : Camera, ndarray (4, 4)
+        The camera and ``T_cam_lidar`` the view is judged at.
+    sensor_pose : ndarray (4, 4), optional
+        The sensor's pose in the LiDAR frame ``T`` applies to (clouds in a vehicle frame).
+
+    Returns
+    -------
+    ndarray, shape (2,), or None
+        Median image distance (px) between the directions of neighbouring returns in view:
+        along a ring (the azimuth step), and to the azimuth-nearest return of the next ring
+        down (the beam spacing). None when the view holds too few returns on rings.
+    """
+    pts = np.asarray(points, dtype=np.float64)[:, :3]
+    r = np.linalg.norm(pts, axis=1)
+    ok = (np.asarray(ring) >= 0) & (r > 0)
+    if ok.sum() < 3:
+        return None
+    rays = pts[ok] / r[ok, None] * SAMPLING_RAY_M
+    if sensor_pose is not None:
+        rays = transform_points(sensor_pose, rays)
+    uv, _, vis = project(rays, camera, T, z_min)
+    vis &= in_image(uv, camera.width, camera.height, 0.0)
+    rg = np.asarray(ring)[ok]
+    psi = np.mod(np.arctan2(pts[ok, 1], pts[ok, 0]), 2.0 * np.pi)
+    order = np.lexsort((psi, rg))
+    rg, psi, uv, vis = rg[order], psi[order], uv[order], vis[order]
+    same = (rg[1:] == rg[:-1]) & vis[1:] & vis[:-1]
+    along = np.linalg.norm(uv[1:] - uv[:-1], axis=1)[same]
+    across = []
+    ids, start = np.unique(rg, return_index=True)
+    end = np.r_[start[1:], len(rg)]
+    for k in range(len(ids) - 1):
+        if ids[k + 1] != ids[k] + 1:                # a ring missing in between
+            continue
+        a, b = slice(start[k], end[k]), slice(start[k + 1], end[k + 1])
+        if end[k + 1] - start[k + 1] < 2:
+            continue
+        j = np.clip(np.searchsorted(psi[b], psi[a]), 1, end[k + 1] - start[k + 1] - 1)
+        pa, pb = psi[b][j - 1], psi[b][j]
+        j = np.where(np.abs(psi[a] - pa) < np.abs(pb - psi[a]), j - 1, j)
+        m = vis[a] & vis[b][j]
+        across.append(np.linalg.norm(uv[a][m] - uv[b][j][m], axis=1))
+    across = np.concatenate(across) if across else np.empty(0)
+    if len(along) < 3 or len(across) < 3:
+        return None
+    return np.array([np.median(along), np.median(across)])
 
 
 def _near_view(points: np.ndarray, camera: Camera, T: np.ndarray, z_min: float,
