@@ -233,16 +233,22 @@ def kitti():
     return load_frames(root, "0:11")
 
 
-def test_kitti_directions_of_travel_agree(kitti):
+@pytest.fixture(scope="module")
+def kitti_motion(kitti):
+    lo = lidar_odometry([f.points[:, :3] for f in kitti], method="own", points=8000)
+    cams = camera_odometry([f.image for f in kitti], kitti[0].camera, pairs=[(0, 10)],
+                           bootstrap=20)
+    return lo, cams
+
+
+def test_kitti_directions_of_travel_agree(kitti, kitti_motion):
     """Frames 0 and 10 (2.2 m apart): the camera's direction of travel and the LiDAR's, mapped
     through the reference, agree. benchmarks/egomotion.py measured 0.12-1.23 deg (median 0.68)
     over the ten 10-frame pairs of the drive, with bootstrap spreads of 0.57-1.35 deg; the bound
     is the worst pair plus the largest spread, 2.6 deg. The relative rotations agree within
     0.04-0.24 deg there; bound 0.4 deg."""
-    lo = lidar_odometry([f.points[:, :3] for f in kitti], method="own", points=8000)
+    lo, cams = kitti_motion
     assert not lo.standing.any()
-    cams = camera_odometry([f.image for f in kitti], kitti[0].camera, pairs=[(0, 10)],
-                           bootstrap=20)
     assert cams[0].ok, cams[0].reason
     ag = compare_motion(lo, cams, kitti[0].T_ref)
     assert ag.direction_deg[0] < 2.6
@@ -281,3 +287,107 @@ def test_standing_lidar_pair_in_words(pandaset):
     pts = pandaset[0].points[:, :3]
     lo = lidar_odometry([pts, pts], method="own", points=8000, seed=1)
     assert lo.standing.all() and lo.reasons[0].startswith("standing")
+
+
+# ----------------------------------------------------------------------------- rotation from motion
+
+def _odometry(pair_poses, sigma_t=0.002, sigma_r=1e-4):
+    """LiDAR odometry holding the given pair poses with a small covariance."""
+    from paretocal.egomotion import _finish
+    cov = np.tile(np.diag([sigma_t ** 2] * 3 + [sigma_r ** 2] * 3), (len(pair_poses), 1, 1))
+    return _finish("own", np.array(pair_poses), cov, np.zeros(len(pair_poses)), 1e-3, "")
+
+
+def _camera_pairs(pair_poses, X, flip=(), dir_sigma=0.3):
+    """What the camera sees of those motions through X (exact), some directions reversed."""
+    from paretocal.egomotion import CameraPair
+    out = []
+    for k, T in enumerate(pair_poses):
+        Tc = in_camera(T, X)
+        d = Tc[:3, 3] / np.linalg.norm(Tc[:3, 3])
+        out.append(CameraPair(i=k, j=k + 1, R=Tc[:3, :3], direction=-d if k in flip else d,
+                              matches=200, inliers=200, direction_sigma_deg=dir_sigma,
+                              rotation_sigma_deg=0.02, parallax_px=20, noise_px=0.3, ok=True,
+                              rotation_ok=True, reason=""))
+    return out
+
+
+def _step(yaw_deg, forward=2.0, pitch_deg=0.0):
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("zy", [yaw_deg, pitch_deg], degrees=True).as_matrix()
+    T[:3, 3] = [forward * math.cos(math.radians(yaw_deg / 2)),
+                forward * math.sin(math.radians(yaw_deg / 2)), 0.0]
+    return T
+
+
+X_TRUE = np.array([[0, -1, 0, 0.1], [0, 0, -1, -0.4], [1, 0, 0, -0.8], [0, 0, 0, 1.0]])
+X_TRUE[:3, :3] = Rotation.from_euler("xyz", [2.0, -3.0, 1.0], degrees=True).as_matrix() @ \
+    X_TRUE[:3, :3]
+
+
+def _off(R, deg, axis):
+    return Rotation.from_rotvec(np.radians(deg) * np.asarray(axis, float)).as_matrix() @ R
+
+
+def test_a_drive_with_turns_gives_the_whole_rotation():
+    """Straight steps and 12 deg turns: the directions and the turn axes pin all three angles,
+    from an initial rotation 15 deg off, the lever arm taken off with a translation 10 cm off."""
+    from paretocal.egomotion import rotation_from_motion
+    poses = [_step(0.0), _step(12.0), _step(0.5), _step(-12.0), _step(0.0, pitch_deg=0.5)]
+    lo, cams = _odometry(poses), _camera_pairs(poses, X_TRUE)
+    R0 = _off(X_TRUE[:3, :3], 15.0, [0.6, 0.0, 0.8])
+    mr = rotation_from_motion(lo, cams, R0, X_TRUE[:3, 3] + 0.1, t_sigma_m=0.1)
+    assert mr.free_axis is None and mr.turns >= 2 and mr.directions == 5
+    assert rotation_angle_deg(mr.R @ X_TRUE[:3, :3].T) < 0.3
+    assert np.all(np.isfinite(mr.sigma_deg)) and mr.change_deg == pytest.approx(15.0, abs=0.5)
+
+
+def test_a_straight_drive_leaves_the_angle_about_the_direction_of_travel():
+    """No turn: the two angles across the direction of travel come from the motion, the one
+    about it stays the initial one; a camera direction with the wrong sign is dropped."""
+    from paretocal.egomotion import rotation_from_motion
+    poses = [_step(0.0), _step(0.0, 1.5), _step(0.0, 2.5), _step(0.0)]
+    lo = _odometry(poses)
+    cams = _camera_pairs(poses, X_TRUE, flip=(2,))
+    d_cam = X_TRUE[:3, :3] @ np.array([1.0, 0.0, 0.0])       # travel, camera frame
+    across = np.cross(d_cam, [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    R0 = _off(_off(X_TRUE[:3, :3], 8.0, across), 6.0, d_cam)   # 8 deg across, 6 deg about
+    mr = rotation_from_motion(lo, cams, R0, X_TRUE[:3, 3])
+    assert mr.reversed == 1 and "sign is wrong" in " ".join(mr.reasons)
+    assert mr.directions == 3 and mr.turns == 0
+    assert mr.free_axis is not None and _angle(mr.free_axis, d_cam) < 1.0
+    assert "not observed" in " ".join(mr.reasons)
+    err = Rotation.from_matrix(mr.R @ X_TRUE[:3, :3].T).as_rotvec()
+    along = float(np.degrees(err @ d_cam))
+    assert abs(along) == pytest.approx(6.0, abs=0.3)             # the initial angle, kept
+    assert np.degrees(np.linalg.norm(err - np.radians(along) * d_cam)) < 0.2
+
+
+def test_no_motion_keeps_the_initial_rotation_and_says_why():
+    from paretocal.egomotion import rotation_from_motion
+    poses = [_step(0.0, forward=0.0)]
+    lo = _odometry(poses)
+    cams = _camera_pairs([_step(0.0)], X_TRUE)
+    cams[0].ok, cams[0].rotation_ok = False, False
+    mr = rotation_from_motion(lo, cams, X_TRUE[:3, :3])
+    assert not mr.usable and np.allclose(mr.R, X_TRUE[:3, :3]) and mr.reasons
+
+
+def test_kitti_rotation_from_the_direction_of_travel(kitti, kitti_motion):
+    """From a rotation 10 deg off across the direction of travel, frames 0 and 10 bring the two
+    angles across it back within the directions' agreement (bound as above, 2.6 deg); the
+    drive goes straight, so the angle about the direction is left as it was."""
+    from paretocal.egomotion import rotation_from_motion
+    lo, cams = kitti_motion
+    X = kitti[0].T_ref
+    d_cam = cams[0].direction
+    across = np.cross(d_cam, [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    R0 = _off(X[:3, :3], 10.0, across)
+    mr = rotation_from_motion(lo, cams, R0, X[:3, 3], t_sigma_m=0.25)
+    assert mr.free_axis is not None and mr.directions == 1
+    err = Rotation.from_matrix(mr.R @ X[:3, :3].T).as_rotvec()
+    across_err = err - (err @ mr.free_axis) * mr.free_axis
+    assert np.degrees(np.linalg.norm(across_err)) < 2.6
+    assert rotation_angle_deg(R0 @ X[:3, :3].T) > 9.9
