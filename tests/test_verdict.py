@@ -151,7 +151,11 @@ def test_intervals_combine_jackknife_and_alignment():
 def test_the_bias_tolerance_is_the_alignment_or_half_the_sampling_step():
     from paretocal.verdict import bias_tolerance_px
 
-    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 5.6])), [1.6, 2.8])
+    # KITTI's 64 beams (returns 2.5 px apart along a ring, 5.6 px between rings): the
+    # alignment; the Pandar64 in PandaSet's 1970 px camera (7.3, 6.8 px): half the finest.
+    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 5.6])), [1.6, 1.6])
+    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([7.3, 6.8])), [3.4, 3.4])
+    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 22.0])), [1.6, 1.6])
     np.testing.assert_allclose(bias_tolerance_px(1.6, None), [1.6, 1.6])
     assert np.isnan(bias_tolerance_px(float("nan"), np.array([2.5, 5.6]))).all()
 
