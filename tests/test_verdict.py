@@ -153,11 +153,11 @@ def test_the_bias_tolerance_is_the_alignment_or_half_the_sampling_step():
 
     # KITTI's 64 beams (returns 2.5 px apart along a ring, 5.6 px between rings): the
     # alignment; the Pandar64 in PandaSet's 1970 px camera (7.3, 6.8 px): half the finest.
-    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 5.6])), [1.6, 1.6])
-    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([7.3, 6.8])), [3.4, 3.4])
-    np.testing.assert_allclose(bias_tolerance_px(1.6, np.array([2.5, 22.0])), [1.6, 1.6])
-    np.testing.assert_allclose(bias_tolerance_px(1.6, None), [1.6, 1.6])
-    assert np.isnan(bias_tolerance_px(float("nan"), np.array([2.5, 5.6]))).all()
+    assert bias_tolerance_px(1.6, np.array([2.5, 5.6])) == 1.6
+    assert bias_tolerance_px(1.6, np.array([7.3, 6.8])) == pytest.approx(3.4)
+    assert bias_tolerance_px(1.6, np.array([2.5, 22.0])) == 1.6
+    assert bias_tolerance_px(1.6, None) == 1.6
+    assert np.isnan(bias_tolerance_px(float("nan"), np.array([2.5, 5.6])))
 
 
 def _rms_px(objective, x, d):
@@ -199,20 +199,6 @@ def test_pose_per_px_is_the_largest_move_of_an_axis_per_pixel_rms(stage):
         rms = np.sqrt(np.mean(fit.fun ** 2) * 2)               # per point: |du, dv|
         assert rms == pytest.approx(0.1, rel=0.05), (AXES[a], rms)
     assert per[2] > 1.5 * res[2]                               # z trades against pitch
-    # With a tolerance per image direction (u, v): the same extent, the displacements
-    # measured in units of that tolerance.
-    tol = np.array([2.0, 5.0])
-    per_t = pose_per_px(stage.objective, x, tol)
-    for a in (2, 4):
-        others = [i for i in range(6) if i != a]
-
-        def disp_w(p, a=a):
-            d = np.insert(p, a, 0.1 * per_t[a])
-            return (_rms_px(stage.objective, x, d).reshape(-1, 2) / tol).ravel()
-        fit = least_squares(disp_w, np.zeros(5), x_scale=per_t[others], diff_step=1e-3)
-        rms = np.sqrt(np.mean(fit.fun ** 2) * 2)
-        assert rms == pytest.approx(0.1, rel=0.05), (AXES[a], rms)
-    assert per_t[4] > per[4]                                   # pitch: v is looser
 
 
 def test_alignment_is_the_median_distance_of_edge_points_to_image_edges(stage):

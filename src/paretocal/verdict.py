@@ -296,18 +296,13 @@ def alignment_px(objective, x_opt: np.ndarray) -> float:
     return float(np.median(d)) if len(d) else float("nan")
 
 
-def pose_per_px(objective, x_opt: np.ndarray, tolerance_px=(1.0, 1.0)) -> np.ndarray:
+def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
     """Per axis (m, m, m, deg, deg, deg), the largest change of that axis among the pose
     changes at ``x_opt`` (7,) that move the feature points in view by one pixel rms, the other
     axes free to compensate: ``sqrt(diag(M^-1))`` with ``M`` the mean over the points of
     ``J_p^T J_p`` (``J_p``: the 2 x 6 pixel Jacobian of point p, by finite differences). It
     exceeds the one-axis :func:`~paretocal.quality.axis_resolution` where axes trade against
-    each other (camera height against pitch); inf for an axis the points do not pin down.
-
-    ``tolerance_px`` (u, v) scales the image's two directions: the poses then move the points
-    by at most ``tolerance_px`` rms in each (one pixel each by default), and the result is in
-    axis units for that displacement rather than per pixel."""
-    t = np.asarray(tolerance_px, dtype=np.float64)
+    each other (camera height against pitch); inf for an axis the points do not pin down."""
     sc = objective.scene
     eps = np.r_[[1e-4] * 3, [1e-3] * 3]                        # m, deg: far below a pixel
     X = np.tile(np.asarray(x_opt, dtype=np.float64), (7, 1))
@@ -321,7 +316,7 @@ def pose_per_px(objective, x_opt: np.ndarray, tolerance_px=(1.0, 1.0)) -> np.nda
             continue
         uv, _, _ = project(pts[vis], sc.cameras[f], T[1:], sc.z_min)      # (6, m, 2)
         J = (uv - uv0[vis][None]) / eps[:, None, None]
-        J = np.where(np.isfinite(J), J, 0.0) / t
+        J = np.where(np.isfinite(J), J, 0.0)
         M += np.einsum("amk,bmk->ab", J, J)
         count += int(vis.sum())
     if count == 0:
@@ -334,20 +329,19 @@ def pose_per_px(objective, x_opt: np.ndarray, tolerance_px=(1.0, 1.0)) -> np.nda
     return np.sqrt(var)
 
 
-def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> np.ndarray:
-    """How far, in pixels along the image's u and v, a bias that every frame shares may move
-    the LiDAR's edges from the image's (shape (2,)): the image alignment the result reached,
-    ``align_px``, and no less than half the LiDAR's finest sampling step in the image
-    (``min(sampling) / 2``, :func:`~paretocal.features.prepare.sampling_px`): an edge lies
-    somewhere between two returns and every frame places it by the same rule, so no rig
-    places its edges better than half its finest step. The finest, not each direction's own:
-    edges of every orientation pin the pose together, and a sparse direction (16 beams,
-    1.7 deg between rings) is crossed by edges the dense one places (measured: the KITTI
-    drive decimated to 16 beams still ends 0.3-0.4 deg / 2-5 cm off)."""
-    t = np.full(2, float(align_px))
+def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
+    """How far, in pixels, a bias that every frame shares may move the LiDAR's edges from the
+    image's: the image alignment the result reached, ``align_px``, and no less than half the
+    LiDAR's finest sampling step in the image (``min(sampling) / 2``,
+    :func:`~paretocal.features.prepare.sampling_px`): an edge lies somewhere between two
+    returns and every frame places it by the same rule, so no rig places its edges better
+    than half its finest step. The finest, not each direction's own: edges of every
+    orientation pin the pose together, and a sparse direction (16 beams, 1.7 deg between
+    rings) is crossed by edges the dense one places (a floor per direction judged the KITTI
+    drive decimated to 16 beams unreliable although its runs ended 0.3-0.4 deg / 2-5 cm off)."""
     if sampling is not None and np.all(np.isfinite(sampling)):
-        t = np.maximum(t, 0.5 * float(np.min(sampling)))
-    return t
+        return max(float(align_px), 0.5 * float(np.min(sampling)))
+    return float(align_px)
 
 
 def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: SearchSettings,
@@ -361,10 +355,10 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
     intrinsics off by a constant image offset, the LiDAR placing every edge between its
     returns by one rule): the result is taken to be known to within the image alignment it
     reached, ``align_px`` (:func:`alignment_px`, measured at the result), and no better than
-    half the LiDAR's sampling step in each image direction (:func:`bias_tolerance_px`), on
-    any combination of axes. ``bias`` is that bound per axis (:func:`pose_per_px` with that
-    tolerance); without it, ``align_px * per_px`` (the largest change of that axis among the
-    poses that move the points by that much rms). half = sqrt((Z95 se)^2 + bias^2). An axis
+    half the LiDAR's finest sampling step in the image (:func:`bias_tolerance_px`), on
+    any combination of axes. ``bias`` is that bound per axis (the tolerance times
+    ``per_px``, the largest change of that axis among the poses that move the points by a
+    pixel rms); without it, ``align_px * per_px``. half = sqrt((Z95 se)^2 + bias^2). An axis
     whose half-width exceeds the stated initial error, or that has no jackknife (one frame),
     is *not determined* by the data.
 
@@ -442,14 +436,12 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     # also carries its Hessian's differences times the remaining gradient.
     at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
     align = alignment_px(objective, x_opt)
-    tol = bias_tolerance_px(align, sampling)
+    per_px = pose_per_px(objective, x_opt)
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
            "start": start_evidence(objective, x_opt),
-           "intervals": intervals(at_opt, pose_per_px(objective, x_opt), align,
-                                  settings.search, axis_resolution(objective, x_opt),
-                                  sampling_px=sampling,
-                                  bias=(pose_per_px(objective, x_opt, tol)
-                                        if np.all(np.isfinite(tol)) else None))}
+           "intervals": intervals(at_opt, per_px, align, settings.search,
+                                  axis_resolution(objective, x_opt), sampling_px=sampling,
+                                  bias=bias_tolerance_px(align, sampling) * per_px)}
     if restart is not None:
         out["restart"] = restart
     return out
