@@ -20,8 +20,9 @@ Two things keep a wrong pose from winning by seeing less:
 * the images are normalised per frame (median and spread), so an exposure change between frames
   is not a disagreement.
 
-Not yet modelled: occlusion (a point hidden behind nearer structure in some frame reads the
-occluder there; at the right pose this adds the same variance to every candidate near it).
+Occlusion: in each frame a point counts only when no map point of its z-buffer cell lies
+nearer by more than :data:`OCCLUSION_REL` of its range (the cells sized so that a surface's
+points cover them, :func:`occlusion_cell_px`); otherwise it would read the occluder there.
 
 The evaluator is a numba kernel over the whole population (parallel over candidates; each frame
 projects blocks of points through the camera model with the edge kernel's projection blocks), and
@@ -112,6 +113,20 @@ def normalised_grey(image: np.ndarray) -> np.ndarray:
     q25, q50, q75 = np.percentile(g, [25, 50, 75])
     spread = (q75 - q25) / 1.349
     return ((g - q50) / (spread if spread > 0 else 1.0)).astype(np.float32)
+
+
+#: A point is hidden in a frame when a map point in the same cell of the image lies nearer than
+#: this share of its range: the near side of a depth step is what the camera sees there.
+OCCLUSION_REL = 0.1
+#: The occlusion cells hold about this many map points each where the map covers the image
+#: (the cell side follows from the map's size and the image's, :func:`occlusion_cell_px`).
+POINTS_PER_CELL = 3.0
+
+
+def occlusion_cell_px(n_points: int, width: int, height: int) -> int:
+    """Side (px) of the z-buffer's cells: about :data:`POINTS_PER_CELL` map points per cell if
+    the map covered the image, so that a surface's points hide what lies behind them."""
+    return max(1, int(np.ceil(np.sqrt(width * height * POINTS_PER_CELL / max(n_points, 1)))))
 
 
 #: Gaussian sigma (px) over which the gradient magnitude is averaged into a pixel's texture.
@@ -224,6 +239,23 @@ def _sample(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return top + fy * (bot - top)
 
 
+def _visible(pc: np.ndarray, uv: np.ndarray, ok: np.ndarray, w: int, h: int,
+             m: int) -> np.ndarray:
+    """Points (camera frame ``pc`` (M, 3), pixels ``uv``, valid ``ok``) not hidden by a nearer
+    point of their z-buffer cell (:data:`OCCLUSION_REL`), as the kernel decides it."""
+    cell = occlusion_cell_px(m, w, h)
+    cw = (w - 1) // cell + 1
+    uu = np.where(ok, uv[:, 0], 0.0)
+    vv = np.where(ok, uv[:, 1], 0.0)
+    x0 = np.minimum(uu.astype(np.int64), w - 2)
+    y0 = np.minimum(vv.astype(np.int64), h - 2)
+    idx = (y0 // cell) * cw + x0 // cell
+    d = np.linalg.norm(pc, axis=1)
+    zb = np.full(((h - 1) // cell + 1) * cw, np.inf)
+    np.minimum.at(zb, idx[ok], d[ok])
+    return ok & (d * (1.0 - OCCLUSION_REL) <= zb[idx])
+
+
 def photo_cost_numpy(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`photo_cost` in plain numpy (the oracle of the kernel)."""
     M = _frame_transforms(scene, T)
@@ -239,6 +271,7 @@ def photo_cost_numpy(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
             T4 = np.vstack([M[c, k], [0.0, 0.0, 0.0, 1.0]])
             uv, _, ok = project(pts, scene.cameras[k], T4, scene.z_min)
             ok &= (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+            ok &= _visible(pts @ M[c, k, :, :3].T + M[c, k, :, 3], uv, ok, w, h, m)
             val = _sample(img, uv[ok, 0], uv[ok, 1])
             S1[c, ok] += val
             S2[c, ok] += val * val
@@ -250,16 +283,25 @@ def photo_cost_numpy(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
 if HAVE_NUMBA:
 
     @njit(parallel=True, cache=True, error_model="numpy")
-    def _photo_numba(M, cam, x, y, z, img, tex, img_start, width, height, z_min, S1, S2, N, W,
-                     KS, FS, OS):  # pragma: no cover - compiled
+    def _photo_numba(M, cam, x, y, z, img, tex, img_start, width, height, cell_px, z_min, S1,
+                     S2, N, W, KS, FS, OS, PK, PF, PD, ZB):  # pragma: no cover - compiled
+        # Per candidate and frame, two passes: project every point (blocks through the lens
+        # model, footprints and ranges kept per thread) filling a z-buffer of cells with the
+        # nearest range; then sample the points no nearer point of their cell hides.
         C, K = M.shape[0], M.shape[1]
         m = x.shape[0]
         for c in prange(C):
             t = numba.get_thread_id()
             KB, FXB, FYB, OKB = KS[t], FS[t, 0], FS[t, 1], OS[t]
+            pk, pfx, pfy, pd, zb = PK[t], PF[t, 0], PF[t, 1], PD[t], ZB[t]
             for k in range(K):
                 w = width[k]
                 h = height[k]
+                cell = cell_px[k]
+                cw = (w - 1) // cell + 1
+                ncell = ((h - 1) // cell + 1) * cw
+                for q in range(ncell):
+                    zb[q] = np.inf
                 base = img_start[k]
                 row = cam[k]
                 kind = int(row[P_MODEL])
@@ -290,19 +332,42 @@ if HAVE_NUMBA:
                                       r23, row, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB,
                                       FXB, FYB, OKB)
                     for j in range(bb - b):
+                        i = b + j
+                        X = np.float64(x[i])
+                        Y = np.float64(y[i])
+                        Z = np.float64(z[i])
+                        xc = r00 * X + r01 * Y + r02 * Z + r03
+                        yc = r10 * X + r11 * Y + r12 * Z + r13
+                        zc = r20 * X + r21 * Y + r22 * Z + r23
+                        kb = KB[j]
+                        pk[i] = kb if OKB[j] else -1
+                        pfx[i] = FXB[j]
+                        pfy[i] = FYB[j]
+                        d = np.sqrt(xc * xc + yc * yc + zc * zc)
+                        pd[i] = d
                         if OKB[j]:
-                            p = base + KB[j]
-                            fx = FXB[j]
-                            fy = FYB[j]
-                            top = img[p] + fx * (img[p + 1] - img[p])
-                            bot = img[p + w] + fx * (img[p + w + 1] - img[p + w])
-                            v = top + fy * (bot - top)
-                            S1[c, b + j] += v
-                            S2[c, b + j] += v * v
-                            N[c, b + j] += 1
-                            top = tex[p] + fx * (tex[p + 1] - tex[p])
-                            bot = tex[p + w] + fx * (tex[p + w + 1] - tex[p + w])
-                            W[c, b + j] += top + fy * (bot - top)
+                            q = ((kb // w) // cell) * cw + (kb % w) // cell
+                            if d < zb[q]:
+                                zb[q] = d
+                for i in range(m):
+                    kb = pk[i]
+                    if kb < 0:
+                        continue
+                    q = ((kb // w) // cell) * cw + (kb % w) // cell
+                    if pd[i] * (1.0 - OCCLUSION_REL) > zb[q]:
+                        continue
+                    p = base + kb
+                    fx = pfx[i]
+                    fy = pfy[i]
+                    top = img[p] + fx * (img[p + 1] - img[p])
+                    bot = img[p + w] + fx * (img[p + w + 1] - img[p + w])
+                    v = top + fy * (bot - top)
+                    S1[c, i] += v
+                    S2[c, i] += v * v
+                    N[c, i] += 1
+                    top = tex[p] + fx * (tex[p + 1] - tex[p])
+                    bot = tex[p + w] + fx * (tex[p + w + 1] - tex[p + w])
+                    W[c, i] += top + fy * (bot - top)
 
 
 def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
@@ -331,7 +396,13 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
     S1, S2, W = np.zeros((C, m)), np.zeros((C, m)), np.zeros((C, m))
     N = np.zeros((C, m), np.int64)
     x, y, z = (np.ascontiguousarray(scene.xyz[:, i]) for i in range(3))
+    threads = numba.config.NUMBA_NUM_THREADS
+    cell = np.array([occlusion_cell_px(m, w, h) for w, h in zip(scene.width, scene.height)],
+                    np.int64)
+    cells = int(max(((h - 1) // c + 1) * ((w - 1) // c + 1)
+                    for w, h, c in zip(scene.width, scene.height, cell)))
     _photo_numba(M, scene.cam_params, x, y, z, scene.images, scene.texture, scene.image_start,
-                 scene.width, scene.height, np.float64(scene.z_min), S1, S2, N, W,
-                 *_scratch(numba.config.NUMBA_NUM_THREADS))
+                 scene.width, scene.height, cell, np.float64(scene.z_min), S1, S2, N, W,
+                 *_scratch(threads), np.empty((threads, m), np.int64),
+                 np.empty((threads, 2, m)), np.empty((threads, m)), np.empty((threads, cells)))
     return _cost_from_sums(S1, S2, N, W, float(np.mean(scene.texture)))
