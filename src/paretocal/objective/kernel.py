@@ -72,7 +72,7 @@ if HAVE_NUMBA:
                 r20 * X + r21 * Y + r22 * Z + r23)
 
     @njit(cache=True, error_model="numpy")
-    def _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22, r23, x, y, z,
+    def pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22, r23, x, y, z,
                        w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
         """Project the points (x, y, z) (m,) through an ideal pinhole into the scratch: the rows
         ``a0*``, ``a1*`` of ``K @ T[:3]`` and the depth row ``r2*`` of ``T``. One division
@@ -88,9 +88,9 @@ if HAVE_NUMBA:
             _footprint(u, v, zc > z_min, w, h, j, KB, FXB, FYB, OKB)
 
     @njit(cache=True, error_model="numpy")
-    def _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y, z,
+    def radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y, z,
                       w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
-        """:func:`_pinhole_block` through a distorted pinhole or a Mei camera (``cam``: the
+        """:func:`pinhole_block` through a distorted pinhole or a Mei camera (``cam``: the
         frame's :meth:`Camera.kernel_params` row; ``r**``: ``T[:3]``), with the arithmetic of
         :meth:`Camera.project_camera_points`. Branch-free, so that it vectorises: every term
         is computed for every point (zero coefficients add exact zeros; a point not valid for
@@ -127,9 +127,9 @@ if HAVE_NUMBA:
             _footprint(u, v, ok & (r2 < lim), w, h, j, KB, FXB, FYB, OKB)
 
     @njit(cache=True, error_model="numpy")
-    def _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y,
+    def fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, cam, x, y,
                        z, w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
-        """:func:`_pinhole_block` through an equidistant fisheye (arctan2 per point: scalar)."""
+        """:func:`pinhole_block` through an equidistant fisheye (arctan2 per point: scalar)."""
         fx_, fy_, cx_, cy_, sk = cam[P_FX], cam[P_FY], cam[P_CX], cam[P_CY], cam[P_SKEW]
         k1, k2, k3, k4 = cam[P_K1], cam[P_K1 + 1], cam[P_K1 + 2], cam[P_K1 + 3]
         lim = cam[P_LIMIT]
@@ -252,15 +252,15 @@ if HAVE_NUMBA:
                     for b in range(a, e, BLOCK):
                         bb = min(b + BLOCK, e)
                         if kind == PINHOLE_IDEAL:
-                            _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21,
+                            pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21,
                                            r22, r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min,
                                            KB, FXB, FYB, OKB)
                         elif kind == FISHEYE:
-                            _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
+                            fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
                                            r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
                                            z_min, KB, FXB, FYB, OKB)
                         else:
-                            _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
+                            radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
                                           r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
                                           z_min, KB, FXB, FYB, OKB)
                         s1, s2, inside = _lookup_sum(dtq, base, w, KB, FXB, FYB, OKB,
@@ -325,7 +325,7 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
                     scene.group_start, scene.group_count, scene.point_start, scene.dtq,
                     scene.dt_start, scene.width, scene.height, scene.has_mask,
                     scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN,
-                    *_scratch(T_))
+                    *block_scratch(T_))
     finally:
         numba.set_num_threads(threads)
     if perm is not None:
@@ -336,7 +336,7 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     return S1, S2, NIN
 
 
-def _scratch(threads: int):
+def block_scratch(threads: int):
     """Per-thread scratch of the fused kernel: footprints (threads, BLOCK + 8) int64, fractions
     (threads, 2, BLOCK + 8) float64, flags (threads, BLOCK + 64) bool, of which a block uses
     the first BLOCK. The unused tail of each row (64 bytes) keeps two threads' data out of

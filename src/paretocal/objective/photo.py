@@ -43,7 +43,7 @@ try:
     import numba
     from numba import njit, prange
 
-    from .kernel import BLOCK, _fisheye_block, _pinhole_block, _radial_block
+    from .kernel import BLOCK, fisheye_block, pinhole_block, radial_block
 
     HAVE_NUMBA = True
 except Exception:  # pragma: no cover - exercised only where numba is broken
@@ -320,15 +320,15 @@ if HAVE_NUMBA:
                 for b in range(0, m, BLOCK):
                     bb = min(b + BLOCK, m)
                     if kind == PINHOLE_IDEAL:
-                        _pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22,
+                        pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22,
                                        r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB,
                                        FYB, OKB)
                     elif kind == FISHEYE:
-                        _fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
+                        fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
                                        r23, row, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB,
                                        FXB, FYB, OKB)
                     else:
-                        _radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
+                        radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
                                       r23, row, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB,
                                       FXB, FYB, OKB)
                     for j in range(bb - b):
@@ -389,7 +389,7 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
     """
     if not HAVE_NUMBA:  # pragma: no cover
         return photo_cost_numpy(scene, T)
-    from .kernel import _scratch
+    from .kernel import block_scratch
 
     M = _frame_transforms(scene, T)
     C, m = len(M), len(scene.xyz)
@@ -403,6 +403,6 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
                     for w, h, c in zip(scene.width, scene.height, cell)))
     _photo_numba(M, scene.cam_params, x, y, z, scene.images, scene.texture, scene.image_start,
                  scene.width, scene.height, cell, np.float64(scene.z_min), S1, S2, N, W,
-                 *_scratch(threads), np.empty((threads, m), np.int64),
+                 *block_scratch(threads), np.empty((threads, m), np.int64),
                  np.empty((threads, 2, m)), np.empty((threads, m)), np.empty((threads, cells)))
     return _cost_from_sums(S1, S2, N, W, float(np.mean(scene.texture)))
