@@ -194,7 +194,6 @@ class Stage:
                                               [f.image.edge_uv for f in self.feats],
                                               ucb_k=settings.ucb_k)
 
-
     def sampling_px(self) -> np.ndarray | None:
         """The LiDAR's sampling step in the image, (2,) px along a ring and between rings:
         the median over the frames that measured it (None when none did)."""
