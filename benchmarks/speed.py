@@ -143,7 +143,7 @@ def _limit_kernels():
     import numba
     from numba import njit, prange
 
-    from paretocal.objective.kernel import BLOCK, _pinhole_block
+    from paretocal.objective.kernel import BLOCK, pinhole_block
 
     def make(lookup):
         @njit(parallel=True, error_model="numpy")
@@ -155,7 +155,7 @@ def _limit_kernels():
                 s = 0.0
                 for b in range(0, n, BLOCK):
                     bb = min(b + BLOCK, n)
-                    _pinhole_block(A[c, 0], A[c, 1], A[c, 2], A[c, 3], A[c, 4], A[c, 5],
+                    pinhole_block(A[c, 0], A[c, 1], A[c, 2], A[c, 3], A[c, 4], A[c, 5],
                                    A[c, 6], A[c, 7], A[c, 8], A[c, 9], A[c, 10], A[c, 11],
                                    x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB, FYB, OKB)
                     for j in range(bb - b):

@@ -155,6 +155,29 @@ if HAVE_NUMBA:
             v = fy_ * yd + cy_
             _footprint(u, v, ok, w, h, j, KB, FXB, FYB, OKB)
 
+    @njit(cache=True, error_model="numpy", inline="always")
+    def project_block(row, r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, x, y, z,
+                      w, h, z_min, KB, FXB, FYB, OKB):  # pragma: no cover - compiled
+        """Project the points (x, y, z) (m,) by ``T[:3]`` (rows ``r**``) through the camera
+        model of ``row`` (:meth:`Camera.kernel_params`) into the scratch: the ideal pinhole with
+        K folded into the extrinsic (:func:`pinhole_block`), the equidistant fisheye
+        (:func:`fisheye_block`), any other model (:func:`radial_block`)."""
+        kind = int(row[P_MODEL])
+        if kind == PINHOLE_IDEAL:
+            fx_, fy_, cx_, cy_, sk = row[P_FX], row[P_FY], row[P_CX], row[P_CY], row[P_SKEW]
+            # The first two rows of K @ T[:3].
+            pinhole_block(fx_ * r00 + sk * r10 + cx_ * r20, fx_ * r01 + sk * r11 + cx_ * r21,
+                          fx_ * r02 + sk * r12 + cx_ * r22, fx_ * r03 + sk * r13 + cx_ * r23,
+                          fy_ * r10 + cy_ * r20, fy_ * r11 + cy_ * r21, fy_ * r12 + cy_ * r22,
+                          fy_ * r13 + cy_ * r23, r20, r21, r22, r23, x, y, z, w, h, z_min, KB,
+                          FXB, FYB, OKB)
+        elif kind == FISHEYE:
+            fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, row, x, y,
+                          z, w, h, z_min, KB, FXB, FYB, OKB)
+        else:
+            radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23, row, x, y,
+                         z, w, h, z_min, KB, FXB, FYB, OKB)
+
     @njit(cache=True, error_model="numpy")
     def _lookup_sum(dtq, base, w, KB, FXB, FYB, OKB, weight, out, masked, s1, s2,
                     inside):  # pragma: no cover - compiled
@@ -225,23 +248,12 @@ if HAVE_NUMBA:
             mf = point_start[f + 1] - point_start[f]
             masked = has_mask[f]
             row = cam[f]
-            kind = int(row[P_MODEL])
-            fx_, fy_, cx_, cy_, sk = row[P_FX], row[P_FY], row[P_CX], row[P_CY], row[P_SKEW]
             for c in prange(C):
                 t = numba.get_thread_id()
                 KB, FXB, FYB, OKB = KS[t], FS[t, 0], FS[t, 1], OS[t]
                 r00, r01, r02, r03 = R[c, 0, 0], R[c, 0, 1], R[c, 0, 2], R[c, 0, 3]
                 r10, r11, r12, r13 = R[c, 1, 0], R[c, 1, 1], R[c, 1, 2], R[c, 1, 3]
                 r20, r21, r22, r23 = R[c, 2, 0], R[c, 2, 1], R[c, 2, 2], R[c, 2, 3]
-                # The first two rows of K @ T[:3].
-                a00 = fx_ * r00 + sk * r10 + cx_ * r20
-                a01 = fx_ * r01 + sk * r11 + cx_ * r21
-                a02 = fx_ * r02 + sk * r12 + cx_ * r22
-                a03 = fx_ * r03 + sk * r13 + cx_ * r23
-                a10 = fy_ * r10 + cy_ * r20
-                a11 = fy_ * r11 + cy_ * r21
-                a12 = fy_ * r12 + cy_ * r22
-                a13 = fy_ * r13 + cy_ * r23
                 m = min(n[c], mf)
                 inside = 0
                 for g in range(G):
@@ -251,18 +263,9 @@ if HAVE_NUMBA:
                     s2 = 0.0
                     for b in range(a, e, BLOCK):
                         bb = min(b + BLOCK, e)
-                        if kind == PINHOLE_IDEAL:
-                            pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21,
-                                           r22, r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min,
-                                           KB, FXB, FYB, OKB)
-                        elif kind == FISHEYE:
-                            fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
-                                           r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
-                                           z_min, KB, FXB, FYB, OKB)
-                        else:
-                            radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21,
-                                          r22, r23, row, x[b:bb], y[b:bb], z[b:bb], w, h,
-                                          z_min, KB, FXB, FYB, OKB)
+                        project_block(row, r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
+                                      r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB,
+                                      FYB, OKB)
                         s1, s2, inside = _lookup_sum(dtq, base, w, KB, FXB, FYB, OKB,
                                                      weight[b:bb], out, masked, s1, s2, inside)
                     S1[c, f, g] = s1

@@ -36,14 +36,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..camera import FISHEYE, PINHOLE_IDEAL, P_CX, P_CY, P_FX, P_FY, P_MODEL, P_SKEW, Camera, project
+from ..camera import Camera, project
 from ..geometry import invert
 
 try:
     import numba
     from numba import njit, prange
 
-    from .kernel import BLOCK, fisheye_block, pinhole_block, radial_block
+    from .kernel import BLOCK, project_block
 
     HAVE_NUMBA = True
 except Exception:  # pragma: no cover - exercised only where numba is broken
@@ -304,33 +304,13 @@ if HAVE_NUMBA:
                     zb[q] = np.inf
                 base = img_start[k]
                 row = cam[k]
-                kind = int(row[P_MODEL])
-                fx_, fy_, cx_, cy_, sk = row[P_FX], row[P_FY], row[P_CX], row[P_CY], row[P_SKEW]
                 r00, r01, r02, r03 = M[c, k, 0, 0], M[c, k, 0, 1], M[c, k, 0, 2], M[c, k, 0, 3]
                 r10, r11, r12, r13 = M[c, k, 1, 0], M[c, k, 1, 1], M[c, k, 1, 2], M[c, k, 1, 3]
                 r20, r21, r22, r23 = M[c, k, 2, 0], M[c, k, 2, 1], M[c, k, 2, 2], M[c, k, 2, 3]
-                a00 = fx_ * r00 + sk * r10 + cx_ * r20
-                a01 = fx_ * r01 + sk * r11 + cx_ * r21
-                a02 = fx_ * r02 + sk * r12 + cx_ * r22
-                a03 = fx_ * r03 + sk * r13 + cx_ * r23
-                a10 = fy_ * r10 + cy_ * r20
-                a11 = fy_ * r11 + cy_ * r21
-                a12 = fy_ * r12 + cy_ * r22
-                a13 = fy_ * r13 + cy_ * r23
                 for b in range(0, m, BLOCK):
                     bb = min(b + BLOCK, m)
-                    if kind == PINHOLE_IDEAL:
-                        pinhole_block(a00, a01, a02, a03, a10, a11, a12, a13, r20, r21, r22,
-                                       r23, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB,
-                                       FYB, OKB)
-                    elif kind == FISHEYE:
-                        fisheye_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
-                                       r23, row, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB,
-                                       FXB, FYB, OKB)
-                    else:
-                        radial_block(r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22,
-                                      r23, row, x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB,
-                                      FXB, FYB, OKB)
+                    project_block(row, r00, r01, r02, r03, r10, r11, r12, r13, r20, r21, r22, r23,
+                                  x[b:bb], y[b:bb], z[b:bb], w, h, z_min, KB, FXB, FYB, OKB)
                     for j in range(bb - b):
                         i = b + j
                         X = np.float64(x[i])
