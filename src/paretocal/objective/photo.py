@@ -8,7 +8,7 @@ of the variance of the image intensities at the point across the frames that see
 edge, no intensity from the LiDAR and no single image to match the cloud: only motion (Ishikawa et
 al., ICRA 2024, call it the intensity variance cost).
 
-Two things keep a wrong pose from winning by seeing less:
+Three things keep a wrong pose from winning by seeing less, or by a change of exposure:
 
 * each point counts by the texture where it lands (samples on sky or a blank wall tell nothing
   and weigh nearly nothing), and the cost is shrunk towards what unrelated pixels cost
@@ -37,13 +37,13 @@ import cv2
 import numpy as np
 
 from ..camera import Camera, project
-from ..geometry import invert
+from ..geometry import invert, transform_points
 
 try:
     import numba
     from numba import njit, prange
 
-    from .kernel import BLOCK, project_block
+    from .kernel import BLOCK, block_scratch, project_block
 
     HAVE_NUMBA = True
 except Exception:  # pragma: no cover - exercised only where numba is broken
@@ -174,12 +174,13 @@ def build_photo_scene(clouds, poses: np.ndarray, images, cameras: list[Camera], 
         p = np.asarray(pts, dtype=np.float64)[:, :3]
         r = np.linalg.norm(p, axis=1)
         p = p[(r > min_range_m) & (r < max_range_m)]
-        parts.append(p @ P[:3, :3].T + P[:3, 3])
+        parts.append(transform_points(P, p))
     xyz = np.vstack(parts)
+    to_sweep = np.array([invert(P) for P in poses])
     if view is not None:
         seen = np.zeros(len(xyz), np.int64)
-        for P, cam in zip(poses, cameras):
-            uv, _, ok = project(xyz, cam, np.asarray(view, np.float64) @ invert(P), z_min)
+        for Q, cam in zip(to_sweep, cameras):
+            uv, _, ok = project(xyz, cam, np.asarray(view, np.float64) @ Q, z_min)
             mu, mv = margin * cam.width, margin * cam.height
             seen += (ok & (uv[:, 0] > -mu) & (uv[:, 0] < cam.width + mu)
                      & (uv[:, 1] > -mv) & (uv[:, 1] < cam.height + mv))
@@ -191,7 +192,7 @@ def build_photo_scene(clouds, poses: np.ndarray, images, cameras: list[Camera], 
     w = np.array([g.shape[1] for g in grey], np.int64)
     start = np.r_[0, np.cumsum(h * w)[:-1]].astype(np.int64)
     return PhotoScene(xyz=np.ascontiguousarray(xyz, np.float32),
-                      to_sweep=np.array([invert(P) for P in poses]),
+                      to_sweep=to_sweep,
                       images=np.concatenate([g.ravel() for g in grey]),
                       texture=np.concatenate([texture(g).ravel() for g in grey]),
                       image_start=start,
@@ -209,10 +210,11 @@ def _frame_transforms(scene: PhotoScene, T: np.ndarray) -> np.ndarray:
 
 def _cost_from_sums(S1, S2, N, W, tau):
     """Per candidate (S1, S2, N, W: (C, M) per-point sums of the intensity, its square, the
-    frames that saw the point and the texture there): ``cost``, the texture-weighted mean over
-    the points seen by at least two frames of their intensity variance across those frames
-    (a point's weight its mean texture: samples on sky or a blank wall tell nothing, so they
-    neither help nor harm a pose; :data:`UNSEEN_COST` when no point is seen twice);
+    frames that saw the point and the texture there; ``tau`` the images' mean texture):
+    ``cost``, the texture-weighted mean over the points seen by at least two frames of their
+    intensity variance across those frames (a point's weight its mean texture: samples on sky
+    or a blank wall tell nothing, so they neither help nor harm a pose), shrunk towards
+    :data:`UNSEEN_COST` as if :data:`PRIOR_POINTS` points of weight ``tau`` had cost that;
     ``coverage``, the share of points seen by at least two frames; ``variance_seen``, the
     unweighted mean variance over those."""
     seen = N >= 2
@@ -362,15 +364,14 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
     Returns
     -------
     dict
-        ``cost`` (C,): mean over the map's points of the variance of the normalised intensities
-        across the frames that see the point (lower is better; :data:`UNSEEN_COST` for a point
-        seen by fewer than two frames); ``coverage`` (C,): the share of points seen by at least
-        two frames.
+        ``cost`` (C,): the texture-weighted mean over the map's points seen by at least two
+        frames of the variance of the normalised intensities across those frames, shrunk
+        towards :data:`UNSEEN_COST` (lower is better; :func:`_cost_from_sums`);
+        ``coverage`` (C,): the share of points seen by at least two frames;
+        ``variance_seen`` (C,): the unweighted mean variance over those points.
     """
     if not HAVE_NUMBA:  # pragma: no cover
         return photo_cost_numpy(scene, T)
-    from .kernel import block_scratch
-
     M = _frame_transforms(scene, T)
     C, m = len(M), len(scene.xyz)
     S1, S2, W = np.zeros((C, m)), np.zeros((C, m)), np.zeros((C, m))
