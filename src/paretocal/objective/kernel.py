@@ -235,8 +235,9 @@ if HAVE_NUMBA:
         # float32, so a 1242 x 375 frame fits a 1 MB L2 cache; bilinear lookups were 55 % of
         # the time with float32. Costs are accumulated in DT units and scaled by the caller.
         # Points are grouped (Scene.gx ...): each group's sums take one run of points, no
-        # per-point branch on the group. The camera model is chosen once per frame: the ideal
-        # pinhole has K folded into the extrinsic (one division per point, vectorised).
+        # per-point branch on the group. The camera model is chosen once per block of points
+        # (project_block): the ideal pinhole has K folded into the extrinsic (one division per
+        # point, vectorised).
         C = R.shape[0]
         F = point_start.shape[0] - 1
         G = group_start.shape[1]
