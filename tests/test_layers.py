@@ -15,7 +15,7 @@ RANKS = {
     "features": 4, "motion": 4, "egomotion": 4,
     "objective": 5, "testing": 5,
     "search": 6, "quality": 6, "decide": 6,
-    "inputs": 7, "stage": 7, "verdict": 7, "result": 7,
+    "inputs": 7, "stage": 7, "verdict": 7, "result": 7, "wide": 7,
     "pipeline": 8, "check": 8, "depth": 8, "extract": 8,
     "report": 9,
     "study": 10, "batch": 10, "rundir": 10, "rig": 10,

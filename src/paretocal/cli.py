@@ -71,6 +71,7 @@ Rule = _choices("decision", "rule", "Rule")
 Chamfer = _choices("objective", "chamfer", "Chamfer")
 Cost = _choices("objective", "cost", "Cost")
 Evaluator = _choices("objective", "evaluator", "Evaluator")
+Wide = _choices("search", "wide", "Wide")
 
 
 def _setup_logging(verbose: bool, quiet: bool) -> None:
@@ -241,6 +242,9 @@ def calibrate(
              "init_error in calib.yaml). The search box is 1.5 times this.")] = None,
     bound_t: Annotated[Optional[float], typer.Option("--bound-t", help="Translation bound (+- m).")] = None,
     bound_r: Annotated[Optional[float], typer.Option("--bound-r", help="Rotation bound (+- deg).")] = None,
+    wide: Annotated[Optional[Wide], typer.Option(
+        help="The wide start from the recording's motion: auto (default) when --init-error "
+             "exceeds 10 deg or 0.3 m, on, off.")] = None,
     chamfer: Annotated[Optional[Chamfer], typer.Option(help="Alignment objective.")] = None,
     w_edge: Annotated[Optional[float], typer.Option("--w-edge", help="w1 of the edge term; "
                                                     "w2 = 1 - w1 weighs the intensity term.")] = None,
@@ -268,7 +272,7 @@ def calibrate(
                  "--config": config, "--budget-ms": budget_ms, "--rule": rule,
                  "--max-deviation": max_deviation, "--n-min": n_min, "--n-max": n_max,
                  "--init-error": init_error, "--bound-t": bound_t, "--bound-r": bound_r,
-                 "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
+                 "--wide": wide, "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
                  "--evaluator": evaluator, "--polish/--no-polish": polish,
                  "--no-figures": None if figures else False, "--force": force or None}
         clash = [name for name, value in given.items() if value is not None]
@@ -288,7 +292,7 @@ def calibrate(
     settings = settings.replace(
         search={"pop": pop, "gens": gens, "seed": seed, "n_min": n_min, "n_max": n_max,
                 "bound_t_m": bound_t, "bound_r_deg": bound_r, "init_error_deg": err_deg,
-                "init_error_m": err_m},
+                "init_error_m": err_m, "wide": wide.value if wide else None},
         objective={"chamfer": chamfer.value if chamfer else None, "w_edge": w_edge,
                    "cost": cost.value if cost else None,
                    "evaluator": evaluator.value if evaluator else None},

@@ -101,6 +101,8 @@ class SearchSettings:
     seed_points: int = 200           #: points per frame for the grid
     seed_count: int = 8              #: grid poses placed in the initial population
     seed_grid_t_m: float | None = None  #: joint rotation x translation grid step (m); off
+    #: The wide start (paretocal.wide): "auto" when the stated error is wide, "on", "off".
+    wide: str = "auto"
 
     @property
     def bound_t(self) -> float:
@@ -339,6 +341,7 @@ CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
     ("objective", "evaluator"): ("auto", "numba", "numpy"),
     ("decision", "rule"): ("knee", "knee-chamfer", "budget", "min-chamfer"),
     ("motion", "deskew"): ("auto", "off"),
+    ("search", "wide"): ("auto", "on", "off"),
     ("features", "ring_method"): ("auto", "field", "scan", "lines", "elevation"),
     ("features", "edge_weight"): ("none", "sqrt_jump", "depth_balanced"),
 }

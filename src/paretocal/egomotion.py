@@ -886,6 +886,22 @@ def _rotvec(R: np.ndarray) -> np.ndarray:
     return ang * w / n
 
 
+def _without_twist(D: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The swing ``S`` of ``D = T S`` (3x3), ``T`` a rotation about the unit ``axis``
+    (swing-twist decomposition: the twist's quaternion is ``D``'s with its vector part
+    projected on the axis)."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(D).as_quat()           # x, y, z, w
+    a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    t = np.r_[(q[:3] @ a) * a, q[3]]
+    nt = np.linalg.norm(t)
+    if nt < 1e-12:                                   # a half turn across the axis: no twist
+        return D
+    T = Rotation.from_quat(t / nt).as_matrix()
+    return T.T @ D
+
+
 def _weighted_kabsch(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``R`` minimising ``sum w |b - R a|^2`` (a, b: (K, 3); w: (K,))."""
     H = (a * w[:, None]).T @ b
@@ -1001,6 +1017,13 @@ def rotation_from_motion(lidar: LidarOdometry, camera: Sequence[CameraPair],
                        f"fixes it only to {math.degrees(1.0 / math.sqrt(max(ev[0], 1e-300))):.2g}"
                        f" deg): the initial one is kept, for the search to refine")
     R = _weighted_kabsch(a, b, w)
+    if free is not None:
+        # The prior only breaks the tie: noise across nearly parallel directions can still
+        # turn the fit about the free axis (by 150 deg on KITTI pairs 4 frames apart). Keep
+        # the initial angle about it exactly: of R R0^T = twist * swing, with the twist about
+        # the free axis applied last (it leaves the direction of travel where the fit put it),
+        # keep the swing.
+        R = _without_twist(R @ R0.T, free) @ R0
     keep = slice(0, n_dir + n_turn)
     res = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", (R @ a[keep].T).T, b[keep]),
                                        -1.0, 1.0)))

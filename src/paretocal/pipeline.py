@@ -27,6 +27,7 @@ from .search.checkpoint import Checkpoint, fingerprint
 from .inputs import (LidarSteps, compensate_motion, lidar_settings_key, locate_lidar,  # noqa: F401
                      resolve_init, sweep_rings, warn_rings, warn_unlocated, describe_inputs)
 from .objective import get_evaluator
+from .wide import after_settings, wanted, wide_start
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
 from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
@@ -101,6 +102,19 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             rings = sweep_rings(frames, settings, first_rings, [(frames[0].camera, T_init)])
         with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
+    wide = None
+    if wanted(settings):
+        with _timed(timings, "wide", progress):
+            wide = wide_start(frames, T_init, settings, rings)
+        if wide.applied:
+            # The usual calibration from the wide start, with the error it is good to.
+            log.info("wide start: %.1f deg / %.0f cm from the start given",
+                     *(float(pose_error(wide.T, T_init)[k])
+                       for k in ("rotation_deg", "translation_cm")))
+            T_init = wide.T
+            settings = after_settings(settings)
+        else:
+            log.warning("the wide start could not apply: %s", "; ".join(wide.reasons))
     if progress is not None:
         progress("features", 0, len(frames))
     with _timed(timings, "features"):
@@ -149,7 +163,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         feature_counts=feature_counts(stage.feats), n_range=(stage.n_min, stage.n_max),
         history=res.history, nsga_front=(res.X, res.F), quality=quality,
         objective=stage.objective, seed_poses=seeds, motion=motion_info,
-        inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence)
+        inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
+        wide=None if wide is None else wide.to_dict())
     result.reliability = reliability(result)
     if result.reliability["verdict"] != "ok":
         log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))
@@ -159,7 +174,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
 #: What the run is doing during each timed phase, for the line an interrupt prints.
 PHASES = {"load": "loading the frames", "lidar_pose": "locating the LiDAR",
           "rings": "recovering the LiDAR rings", "motion": "compensating the motion",
-          "features": "extracting features", "seed_grid": "scoring the seed grid",
+          "wide": "finding a wide start from the motion", "features": "extracting features",
+          "seed_grid": "scoring the seed grid",
           "polish": "polishing the front", "reselect": "re-selecting the points at the estimate",
           "decision": "choosing the solution", "verdict": "gathering the verdict's evidence",
           "writing": "writing the results"}

@@ -69,6 +69,10 @@ class CalibrationResult:
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
     #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
     evidence: dict | None = None
+    #: What the wide start did (:meth:`paretocal.wide.WideStart.to_dict`), None when the
+    #: stated error did not ask for it. When it applied, ``T_init`` is the start it found and
+    #: the settings hold the narrower stated error the calibration used from there.
+    wide: dict | None = None
     #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
     sweeps: list | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
@@ -137,6 +141,7 @@ class CalibrationResult:
             "quality": self.quality,
             "motion": self.motion,
             "inputs": self.inputs,
+            "wide_start": self.wide,
             "reliability": self.reliability if self.reliability is not None
             else reliability(self),
         }

@@ -1,0 +1,365 @@
+"""The wide start: the rotation from the motion both sensors see, then the edge objective over
+what the motion leaves open.
+
+From a start off by tens of degrees and more than a metre, the edge objective's best pose over
+the whole box is often not the truth (a camera moved metres along its optical axis and turned a
+little scores nearly as well), and no amount of search fixes that. Motion does not share that
+failure: the camera's direction of travel (visual odometry) is the LiDAR's (LiDAR odometry)
+turned by the extrinsic's rotation, whatever the translation, so a recording that moves gives two
+of the three angles to a fraction of a degree (:func:`paretocal.egomotion.rotation_from_motion`;
+all three when it turns). With those two angles held near the motion's, the edge objective's
+optimum over what is left, the angle about the direction of travel and the camera's position
+within the stated error, is the truth on every KITTI start measured (README, *Wide starts*),
+provided the search visits it: its basin is narrow along the camera's optical axis, where a
+wrong pose far along that axis has a wide one. So the search is stratified along the optical
+axis: a differential evolution (scipy) in each slice of :data:`STRATUM_SHARE` of the stated
+translation error, over the free angle, the two lateral offsets, the slice's depth and the
+two motion angles within their uncertainty; the best of each slice are polished in all six
+degrees of freedom and the best polished pose is the start of the usual calibration, with a
+narrower stated error (:data:`AFTER_DEG`, :data:`AFTER_M`).
+
+The stage applies only when the stated initial error is wide (:func:`wanted`: beyond
+:data:`WIDE_DEG` or :data:`WIDE_M`, the box the search alone has been measured in) and the
+recording moves; otherwise it says why it could not (a static rig, too few frames, no direction
+of travel both sensors resolve), and the calibration goes on from the start as given.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import Settings
+from .egomotion import camera_odometry, lidar_odometry, rotation_from_motion
+from .geometry import correction_params, invert, pose_error
+from .io.frame import Frame
+from .quality import local_optimum
+from .search.basin import AMBIGUOUS_P, USABLE_DEG, USABLE_M, paired_preference
+from .stage import Stage
+
+log = logging.getLogger(__name__)
+
+#: The stage runs (``search.wide = "auto"``) when the stated initial error exceeds these (deg,
+#: m): the box the search alone reaches the truth from (20 of 20 KITTI starts from +-10 deg /
+#: 0.25 m; 4 of 20 from +-20 deg / 1.5 m).
+WIDE_DEG = 10.0
+WIDE_M = 0.3
+#: The stated error of the calibration that follows a wide start (deg, m): the wide start
+#: lands within a few tenths of a degree and a few cm when it finds the truth's basin.
+AFTER_DEG = 3.0
+AFTER_M = 0.15
+#: Points per sweep of the LiDAR odometry: directions of travel need no more (the
+#: calibration's own ICP default is for de-skewing).
+ODOMETRY_POINTS = 8000
+#: Fewest frames: odometry needs pairs, and the direction of travel a baseline.
+MIN_FRAMES = 3
+#: The camera pairs compared: each frame with the first one far enough for this share of
+#: the image width in parallax at the scene's median range (about 4 m, 10 frames, on the
+#: KITTI drive: the direction of travel from pairs 4 frames apart agreed 1.3 deg RMS, from
+#: 10 apart 0.6 deg) ...
+PARALLAX_SHARE = 0.25
+#: ... and the least travel over the whole recording that gives a direction at all.
+MIN_PARALLAX_SHARE = 0.05
+#: Depth slices of the stratified search, as a share of the stated translation error.
+STRATUM_SHARE = 1.0 / 3.0
+#: The motion's two angles are searched within this many times the pairs' RMS disagreement
+#: with the fit (at least :data:`MIN_BAND_DEG`): the disagreement of one pair bounds what
+#: the fit of several can be off by (KITTI: 0.6 deg with pairs 10 frames apart, 1.3 deg with 4).
+BAND_RESIDUALS = 2.0
+MIN_BAND_DEG = 1.5
+#: Differential evolution in each slice: population per dimension and generations.
+DE_POPSIZE = 10
+DE_GENERATIONS = 40
+#: Slices whose best pose is polished in six degrees of freedom.
+POLISHED = 3
+
+
+@dataclass
+class WideStart:
+    """What the wide start did (:func:`wide_start`).
+
+    Attributes
+    ----------
+    T : ndarray, shape (4, 4), or None
+        The start found (``T_cam_lidar``), None when the stage could not apply.
+    T_given : ndarray, shape (4, 4)
+        The start given.
+    reasons : list of str
+        Why the stage could not apply, or what it leaves open, in words.
+    motion : dict
+        Directions and turns used, reversed pairs, the free axis (LiDAR frame), the motion
+        rotation's change from the start (deg) and its residual (deg), the pairs' stride.
+    basins : list of dict
+        The polished poses, best first: ``f`` (the objective, px), ``separation_deg`` and
+        ``separation_cm`` from the best.
+    ambiguous : bool
+        The best and a distinct runner-up (more than 1 deg or 10 cm apart) are not told apart
+        by the frames (paired test, p >= 0.05).
+    evaluations : int
+        Objective evaluations of the search and the polish.
+    seconds : dict
+        Wall time of the odometry, the search and the polish (s).
+    """
+
+    T: np.ndarray | None
+    T_given: np.ndarray
+    reasons: list = field(default_factory=list)
+    motion: dict = field(default_factory=dict)
+    basins: list = field(default_factory=list)
+    ambiguous: bool = False
+    comparison: dict | None = None
+    evaluations: int = 0
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def applied(self) -> bool:
+        return self.T is not None
+
+    def to_dict(self) -> dict:
+        """For result.json: plain numbers and lists."""
+        moved = pose_error(self.T, self.T_given) if self.T is not None else None
+        return {"applied": self.applied, "reasons": list(self.reasons),
+                "T_given": np.asarray(self.T_given).tolist(),
+                "T_found": None if self.T is None else np.asarray(self.T).tolist(),
+                "moved_deg": None if moved is None else round(float(moved["rotation_deg"]), 3),
+                "moved_cm": None if moved is None else round(float(moved["translation_cm"]), 2),
+                "motion": self.motion, "basins": self.basins, "ambiguous": self.ambiguous,
+                "comparison": self.comparison, "evaluations": int(self.evaluations),
+                "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
+
+
+def wanted(settings: Settings) -> bool:
+    """Whether the settings ask for the wide start: ``search.wide`` "on", or "auto" with a
+    stated initial error beyond :data:`WIDE_DEG` or :data:`WIDE_M`."""
+    s = settings.search
+    if s.wide == "on":
+        return True
+    return s.wide == "auto" and (s.init_error_deg > WIDE_DEG or s.init_error_m > WIDE_M)
+
+
+def after_settings(settings: Settings) -> Settings:
+    """The settings of the calibration that follows a wide start: the stated error narrowed to
+    :data:`AFTER_DEG` / :data:`AFTER_M` (never wider than stated)."""
+    s = settings.search
+    return settings.replace(search={"init_error_deg": min(AFTER_DEG, s.init_error_deg),
+                                    "init_error_m": min(AFTER_M, s.init_error_m),
+                                    "bound_t_m": None, "bound_r_deg": None})
+
+
+def baseline_m(width: int, focal_px: float, median_range_m: float, share: float) -> float:
+    """The baseline (m) that shows ``share`` of the image width in parallax at the scene's
+    median range."""
+    return share * width * median_range_m / focal_px
+
+
+def camera_pairs(lidar_steps_m: np.ndarray, baseline: float,
+                 min_baseline: float) -> list[tuple[int, int]]:
+    """Image pairs a baseline apart.
+
+    Parameters
+    ----------
+    lidar_steps_m : ndarray, shape (K-1,)
+        The LiDAR's travel between consecutive frames (m; 0 for a standing pair, NaN unknown).
+    baseline, min_baseline : float
+        The travel (m) a pair should span, and the least it may.
+
+    Returns
+    -------
+    list of (int, int)
+        Each frame with the first later one ``baseline`` of travel away; when the whole
+        recording travels less, each frame at least ``min_baseline`` from the last one with
+        the last one.
+    """
+    cum = np.r_[0.0, np.cumsum(np.nan_to_num(np.asarray(lidar_steps_m, dtype=np.float64)))]
+    K = len(cum)
+    pairs = []
+    for i in range(K - 1):
+        j = int(np.searchsorted(cum, cum[i] + baseline, side="left"))
+        if j < K:
+            pairs.append((i, j))
+    if not pairs:
+        pairs = [(i, K - 1) for i in range(K - 1) if cum[-1] - cum[i] >= min_baseline]
+    return pairs
+
+
+def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
+               rings=None, progress=None) -> WideStart:
+    """A start within a few tenths of a degree of the truth from one tens of degrees off.
+
+    Parameters
+    ----------
+    frames : list of Frame
+        The frames after the LiDAR steps (located, de-skewed), in time order.
+    T_init : ndarray, shape (4, 4)
+        The start given (``T_cam_lidar``).
+    settings : Settings
+        ``search.init_error_deg`` and ``init_error_m`` bound the search; ``search.seed`` seeds
+        it; the objective's settings are the calibration's.
+    rings : list, optional
+        The sweeps' rings (:func:`paretocal.inputs.sweep_rings`).
+    progress : callable, optional
+        ``progress(done, total)`` over the search's slices.
+
+    Returns
+    -------
+    WideStart
+        ``T`` None, with reasons, when the stage cannot apply.
+    """
+    from scipy.optimize import differential_evolution
+    from scipy.spatial.transform import Rotation
+
+    T0 = np.asarray(T_init, dtype=np.float64)
+    out = WideStart(None, T0.copy())
+    if len(frames) < MIN_FRAMES:
+        out.reasons.append(f"a wide start needs the rig to move over at least {MIN_FRAMES} "
+                           f"frames; there are {len(frames)}")
+        return out
+    s = settings.search
+    t0 = time.perf_counter()
+    clouds = [f.points[:, :3] for f in frames]
+    lo = lidar_odometry(clouds, points=ODOMETRY_POINTS, seed=s.seed)
+    cam = frames[0].camera
+    rng_m = float(np.median(np.linalg.norm(clouds[0], axis=1)))
+    focal = float(cam.K[0, 0])
+    need = baseline_m(cam.width, focal, rng_m, MIN_PARALLAX_SHARE)
+    steps = np.where(lo.standing, 0.0, lo.translation_m)
+    path = float(np.nansum(steps))
+    if path < need:
+        out.reasons.append(f"the rig barely moves: the LiDAR travels {path:.2f} m over the "
+                           f"frames, and a direction of travel needs about {need:.1f} m "
+                           f"({100 * MIN_PARALLAX_SHARE:.0f} % of the image's width in "
+                           f"parallax at the scene's median range, {rng_m:.0f} m); a static "
+                           f"rig gives no direction of travel: give a start within "
+                           f"{WIDE_DEG:g} deg / {WIDE_M:g} m, or frames taken while moving")
+        out.seconds["odometry"] = time.perf_counter() - t0
+        return out
+    pairs = camera_pairs(steps, baseline_m(cam.width, focal, rng_m, PARALLAX_SHARE), need)
+    pairs_out = camera_odometry([f.image for f in frames], cam, pairs=pairs, bootstrap=20,
+                                seed=s.seed)
+    mr = rotation_from_motion(lo, pairs_out, T0[:3, :3], T0[:3, 3], t_sigma_m=s.init_error_m)
+    out.seconds["odometry"] = time.perf_counter() - t0
+    free_lidar = None if mr.free_axis is None else (mr.R.T @ mr.free_axis)
+    out.motion = {"lidar_odometry": lo.method, "pairs": len(pairs),
+                  "stride": int(np.median([j - i for i, j in pairs])) if pairs else None,
+                  "travel_m": round(path, 3),
+                  "directions": mr.directions, "turns": mr.turns, "reversed": mr.reversed,
+                  "free_axis_lidar": None if free_lidar is None
+                  else [round(float(v), 4) for v in free_lidar],
+                  "change_deg": round(float(mr.change_deg), 3),
+                  "residual_deg": None if not np.isfinite(mr.residual_deg)
+                  else round(float(mr.residual_deg), 3),
+                  "standing_pairs": int(np.sum(lo.standing))}
+    if not mr.usable:
+        out.reasons += list(mr.reasons)
+        out.reasons.append("the motion gives no rotation: give a start within "
+                           f"{WIDE_DEG:g} deg / {WIDE_M:g} m")
+        return out
+    out.reasons += [r for r in mr.reasons if "not observed" in r]
+
+    # The motion's rotation, the camera centre where the start puts it.
+    c0 = -T0[:3, :3].T @ T0[:3, 3]
+    Tm = np.eye(4)
+    Tm[:3, :3] = mr.R
+    Tm[:3, 3] = -mr.R @ c0
+    stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation")
+    obj = stage.objective
+    n = stage.n_max
+    axes = _search_axes(mr)
+    resid = mr.residual_deg if np.isfinite(mr.residual_deg) else 0.0
+    band = float(np.clip(BAND_RESIDUALS * resid, MIN_BAND_DEG, s.init_error_deg))
+    Rc = mr.R                                        # camera axes (rows), LiDAR frame
+    half = s.init_error_m * np.abs(Rc).sum(axis=1)  # the box seen along the camera's axes
+    Minv = invert(Tm)
+
+    def corrections(P: np.ndarray) -> np.ndarray:
+        """(C, 7) corrections of ``Tm`` for search points P (C, 6): three angles (deg)
+        about ``axes`` and the camera's offset along its own x, y, z (m)."""
+        R = Rotation.from_rotvec(np.radians(P[:, :3]) @ axes).as_matrix() @ Tm[:3, :3]
+        c = c0 + P[:, 3:] @ Rc
+        T = np.tile(np.eye(4), (len(P), 1, 1))
+        T[:, :3, :3] = R
+        T[:, :3, 3] = -np.einsum("nij,nj->ni", R, c)
+        return np.column_stack([correction_params(Minv[None] @ T), np.full(len(P), n)])
+
+    evals = [0]
+
+    def fun(P: np.ndarray) -> np.ndarray:           # scipy's vectorised form: P (6, C)
+        P = np.atleast_2d(P.T)
+        inside = np.all(np.abs(P[:, 3:] @ Rc) <= s.init_error_m, axis=1)
+        f = np.full(len(P), np.inf)
+        if inside.any():
+            f[inside] = obj.chamfer(corrections(P[inside]), ucb_k=0.0)["f1"]
+            evals[0] += int(inside.sum())
+        return np.where(np.isfinite(f), f, 1e6)
+
+    # About the free axis the start's whole rotation error may lie: each axis off by up to
+    # the stated error is a turn of up to sqrt(3) times it.
+    first = min(math.sqrt(3.0) * s.init_error_deg, 180.0) if mr.free_axis is not None else band
+    step = STRATUM_SHARE * s.init_error_m
+    depths = np.arange(-half[2] + step / 2, half[2], step)
+    t1 = time.perf_counter()
+    best = []
+    for k, dz in enumerate(depths):
+        bounds = [(-first, first), (-band, band), (-band, band), (-half[0], half[0]),
+                  (-half[1], half[1]), (dz - step / 2, dz + step / 2)]
+        res = differential_evolution(fun, bounds, popsize=DE_POPSIZE, maxiter=DE_GENERATIONS,
+                                     vectorized=True, updating="deferred", polish=False,
+                                     tol=0.0, seed=s.seed + k)
+        best.append((float(res.fun), res.x))
+        if progress is not None:
+            progress(k + 1, len(depths))
+    out.seconds["search"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    best.sort(key=lambda b: b[0])
+    starts = corrections(np.array([b[1] for b in best[:POLISHED]]))
+    Z = local_optimum(obj, starts)
+    f = obj.chamfer(Z, ucb_k=0.0)["f1"]
+    evals[0] += len(Z)
+    order = np.argsort(f)
+    Z, f = Z[order], f[order]
+    T = obj.transforms(Z)
+    out.seconds["polish"] = time.perf_counter() - t2
+    out.basins = []
+    for Tk, fk in zip(T, f):
+        e = pose_error(Tk, T[0])
+        out.basins.append({"f": round(float(fk), 4),
+                           "separation_deg": round(float(e["rotation_deg"]), 3),
+                           "separation_cm": round(float(e["translation_cm"]), 2)})
+    rival = next((k for k, b in enumerate(out.basins)
+                  if b["separation_deg"] > USABLE_DEG or b["separation_cm"] > 100 * USABLE_M),
+                 None)
+    if rival is not None and len(frames) >= 2:
+        cmp = paired_preference(obj, Z[rival], Z[0])
+        out.comparison = {k: (round(float(v), 5) if isinstance(v, float) else v)
+                          for k, v in cmp.items()}
+        p = cmp["p"]
+        if not (np.isfinite(p) and p < AMBIGUOUS_P):
+            out.ambiguous = True
+            b = out.basins[rival]
+            out.reasons.append(
+                f"the wide search found two poses {b['separation_deg']:.1f} deg / "
+                f"{b['separation_cm']:.0f} cm apart that the frames do not tell apart "
+                f"({cmp['frames_far_better']} of {cmp['frames']} frames prefer the one kept): "
+                "give a better start, or frames with structure at several distances")
+    out.T = T[0]
+    out.evaluations = evals[0]
+    return out
+
+
+def _search_axes(mr) -> np.ndarray:
+    """(3, 3) rotation axes (rows, camera frame) of the search's three angles: the motion's
+    free axis first (the mean direction of travel; the optical axis when every angle is
+    observed), then two across it."""
+    a = mr.free_axis if mr.free_axis is not None else np.array([0.0, 0.0, 1.0])
+    a = np.asarray(a, dtype=np.float64) / np.linalg.norm(a)
+    e = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e /= np.linalg.norm(e)
+    return np.vstack([a, e, np.cross(a, e)])
+
+
+__all__ = ["AFTER_DEG", "AFTER_M", "WIDE_DEG", "WIDE_M", "WideStart", "after_settings",
+           "baseline_m", "camera_pairs", "wanted", "wide_start"]
