@@ -37,6 +37,7 @@ from .config import Settings
 from .egomotion import camera_odometry, lidar_odometry, rotation_from_motion
 from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
+from .objective.photo import build_photo_scene, photo_cost
 from .quality import local_optimum
 from .search.basin import AMBIGUOUS_P, USABLE_DEG, USABLE_M, paired_preference
 from .stage import Stage
@@ -75,7 +76,17 @@ MIN_BAND_DEG = 1.5
 DE_POPSIZE = 10
 DE_GENERATIONS = 40
 #: Slices whose best pose is polished in six degrees of freedom.
-POLISHED = 3
+POLISHED = 5
+#: Rounds of the search at most: each from the pose the last one kept, until two agree
+#: within :data:`AFTER_DEG` / :data:`AFTER_M`.
+ROUNDS = 3
+#: Map points of the photo-consistency check.
+PHOTO_POINTS = 30_000
+#: Poses farther apart than this (m, deg) are distinct basins for photo-consistency, which
+#: does not resolve poses a few decimetres apart (KITTI: poses 34 and 37 cm from the reference
+#: scored within 0.006 of it) but told every basin a metre or more away from the truth's.
+PHOTO_DISTINCT_M = 0.5
+PHOTO_DISTINCT_DEG = 2.0
 
 
 @dataclass
@@ -94,8 +105,13 @@ class WideStart:
         Directions and turns used, reversed pairs, the free axis (LiDAR frame), the motion
         rotation's change from the start (deg) and its residual (deg), the pairs' stride.
     basins : list of dict
-        The polished poses, best first: ``f`` (the objective, px), ``separation_deg`` and
-        ``separation_cm`` from the best.
+        The polished poses, the one kept first: ``f`` (the edge objective, px), ``photo``
+        (the photo-consistency cost), ``separation_deg`` and ``separation_cm`` from the one
+        kept, ``T``.
+    disagree : bool
+        The edge objective's best pose and the photo-consistent one lie in distinct basins
+        (:data:`PHOTO_DISTINCT_M`, :data:`PHOTO_DISTINCT_DEG`): the photo-consistent one is
+        kept.
     ambiguous : bool
         The best and a distinct runner-up (more than 1 deg or 10 cm apart) are not told apart
         by the frames (paired test, p >= 0.05).
@@ -111,9 +127,11 @@ class WideStart:
     motion: dict = field(default_factory=dict)
     basins: list = field(default_factory=list)
     ambiguous: bool = False
+    disagree: bool = False
     comparison: dict | None = None
     evaluations: int = 0
     seconds: dict = field(default_factory=dict)
+    rounds: list = field(default_factory=list)
 
     @property
     def applied(self) -> bool:
@@ -128,6 +146,7 @@ class WideStart:
                 "moved_deg": None if moved is None else round(float(moved["rotation_deg"]), 3),
                 "moved_cm": None if moved is None else round(float(moved["translation_cm"]), 2),
                 "motion": self.motion, "basins": self.basins, "ambiguous": self.ambiguous,
+                "disagree": self.disagree, "rounds": self.rounds,
                 "comparison": self.comparison, "evaluations": int(self.evaluations),
                 "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
 
@@ -209,8 +228,6 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     WideStart
         ``T`` None, with reasons, when the stage cannot apply.
     """
-    from scipy.optimize import differential_evolution
-    from scipy.spatial.transform import Rotation
 
     T0 = np.asarray(T_init, dtype=np.float64)
     out = WideStart(None, T0.copy())
@@ -260,11 +277,65 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
         return out
     out.reasons += [r for r in mr.reasons if "not observed" in r]
 
-    # The motion's rotation, the camera centre where the start puts it.
-    c0 = -T0[:3, :3].T @ T0[:3, 3]
+    # Rounds: the search from the start, then again from the pose it kept (the points are
+    # chosen at the motion's rotation with the start's camera centre, so a start metres off
+    # sees other points than the truth does: a second look from the first answer sees what
+    # the truth sees). Photo-consistency is scored on one map for every round.
+    scene = None
+    T_start, previous = T0, None
+    for r in range(ROUNDS):
+        mr_r = mr if r == 0 else rotation_from_motion(lo, pairs_out, T_start[:3, :3],
+                                                      T_start[:3, 3],
+                                                      t_sigma_m=s.init_error_m)
+        Tm = _motion_start(mr_r, T_start)
+        if scene is None:
+            t3 = time.perf_counter()
+            # The map from a seeded sample of each sweep (projecting every return of every
+            # sweep into every frame to choose the map would cost seconds).
+            rng = np.random.default_rng(s.seed)
+            per = 4 * PHOTO_POINTS // len(frames)
+            sample = [f.points if len(f.points) <= per
+                      else f.points[np.sort(rng.choice(len(f.points), per, replace=False))]
+                      for f in frames]
+            scene = build_photo_scene(sample, lo.poses,
+                                      [f.image for f in frames], [f.camera for f in frames],
+                                      view=Tm, max_points=PHOTO_POINTS, rng=s.seed)
+            out.seconds["photo"] = time.perf_counter() - t3
+        found = _search_round(frames, rings, settings, Tm, mr_r, T_start, scene, out,
+                              progress)
+        out.rounds.append({"start_deg": round(float(pose_error(T_start, T0)["rotation_deg"]),
+                                              3),
+                           "kept": found["kept"]})
+        T_start = found["T"][0]
+        if previous is not None:
+            e = pose_error(T_start, previous)
+            if e["rotation_deg"] <= AFTER_DEG and e["translation_cm"] <= 100 * AFTER_M:
+                break
+        previous = T_start
+    out.T = T_start
+    return out
+
+
+def _motion_start(mr, T_start: np.ndarray) -> np.ndarray:
+    """The motion's rotation with the camera centre where ``T_start`` puts it, (4, 4)."""
+    c0 = -T_start[:3, :3].T @ T_start[:3, 3]
     Tm = np.eye(4)
     Tm[:3, :3] = mr.R
     Tm[:3, 3] = -mr.R @ c0
+    return Tm
+
+
+def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start: np.ndarray,
+                  scene, out: WideStart, progress) -> dict:
+    """One round of the stratified search about ``Tm`` (the box about ``T_start``'s camera
+    centre); the polished poses ``T`` (k, 4, 4), the one kept first, and what was kept.
+    Fills ``out``'s basins, comparison, reasons and counters."""
+    from scipy.optimize import differential_evolution
+    from scipy.spatial.transform import Rotation
+
+    s = settings.search
+    c0 = -T_start[:3, :3].T @ T_start[:3, 3]
+    t1 = time.perf_counter()
     stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation")
     obj = stage.objective
     n = stage.n_max
@@ -285,23 +356,20 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
         T[:, :3, 3] = -np.einsum("nij,nj->ni", R, c)
         return np.column_stack([correction_params(Minv[None] @ T), np.full(len(P), n)])
 
-    evals = [0]
-
     def fun(P: np.ndarray) -> np.ndarray:           # scipy's vectorised form: P (6, C)
         P = np.atleast_2d(P.T)
         inside = np.all(np.abs(P[:, 3:] @ Rc) <= s.init_error_m, axis=1)
-        f = np.full(len(P), np.inf)
+        f = np.full(len(P), 1e6)
         if inside.any():
             f[inside] = obj.chamfer(corrections(P[inside]), ucb_k=0.0)["f1"]
-            evals[0] += int(inside.sum())
-        return np.where(np.isfinite(f), f, 1e6)
+            out.evaluations += int(inside.sum())
+        return f
 
     # About the free axis the start's whole rotation error may lie: each axis off by up to
     # the stated error is a turn of up to sqrt(3) times it.
     first = min(math.sqrt(3.0) * s.init_error_deg, 180.0) if mr.free_axis is not None else band
     step = STRATUM_SHARE * s.init_error_m
     depths = np.arange(-half[2] + step / 2, half[2], step)
-    t1 = time.perf_counter()
     best = []
     for k, dz in enumerate(depths):
         bounds = [(-first, first), (-band, band), (-band, band), (-half[0], half[0]),
@@ -312,27 +380,47 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
         best.append((float(res.fun), res.x))
         if progress is not None:
             progress(k + 1, len(depths))
-    out.seconds["search"] = time.perf_counter() - t1
+    out.seconds["search"] = out.seconds.get("search", 0.0) + time.perf_counter() - t1
     t2 = time.perf_counter()
     best.sort(key=lambda b: b[0])
-    starts = corrections(np.array([b[1] for b in best[:POLISHED]]))
-    Z = local_optimum(obj, starts)
+    Z = local_optimum(obj, corrections(np.array([b[1] for b in best[:POLISHED]])))
     f = obj.chamfer(Z, ucb_k=0.0)["f1"]
-    evals[0] += len(Z)
+    out.evaluations += len(Z)
     order = np.argsort(f)
     Z, f = Z[order], f[order]
     T = obj.transforms(Z)
-    out.seconds["polish"] = time.perf_counter() - t2
+    pc = photo_cost(scene, T)["cost"]
+    out.seconds["polish"] = out.seconds.get("polish", 0.0) + time.perf_counter() - t2
+    # Photo-consistency tells far basins apart where the edges can be fooled (a camera
+    # metres along its optical axis), though not poses a few decimetres apart.
+    sep = [pose_error(Tk, T[0]) for Tk in T]
+    far = [k for k, e in enumerate(sep) if e["translation_cm"] > 100 * PHOTO_DISTINCT_M
+           or e["rotation_deg"] > PHOTO_DISTINCT_DEG]
+    pick = min(far, key=lambda k: pc[k]) if far else 0
+    out.disagree = bool(far and pc[pick] < pc[0])
+    if out.disagree:
+        order = [pick] + [k for k in range(len(T)) if k != pick]
+        Z, f, T, pc = Z[order], f[order], T[order], pc[order]
     out.basins = []
-    for Tk, fk in zip(T, f):
+    for Tk, fk, ck in zip(T, f, pc):
         e = pose_error(Tk, T[0])
-        out.basins.append({"f": round(float(fk), 4),
+        out.basins.append({"f": round(float(fk), 4), "photo": round(float(ck), 4),
                            "separation_deg": round(float(e["rotation_deg"]), 3),
-                           "separation_cm": round(float(e["translation_cm"]), 2)})
+                           "separation_cm": round(float(e["translation_cm"]), 2),
+                           "T": np.round(Tk, 6).tolist()})
+    out.ambiguous, out.comparison = False, None
+    out.reasons = [r for r in out.reasons if not r.startswith(("the wide search",
+                                                               "the edge objective and"))]
+    if out.disagree:
+        e, k = out.basins[1], out.basins[0]
+        out.reasons.append(
+            f"the edge objective and photo-consistency prefer poses {e['separation_deg']:.1f} "
+            f"deg / {e['separation_cm']:.0f} cm apart; the photo-consistent one is kept "
+            f"(photo {k['photo']:.3f} against {e['photo']:.3f})")
     rival = next((k for k, b in enumerate(out.basins)
                   if b["separation_deg"] > USABLE_DEG or b["separation_cm"] > 100 * USABLE_M),
                  None)
-    if rival is not None and len(frames) >= 2:
+    if rival is not None:
         cmp = paired_preference(obj, Z[rival], Z[0])
         out.comparison = {k: (round(float(v), 5) if isinstance(v, float) else v)
                           for k, v in cmp.items()}
@@ -345,9 +433,10 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                 f"{b['separation_cm']:.0f} cm apart that the frames do not tell apart "
                 f"({cmp['frames_far_better']} of {cmp['frames']} frames prefer the one kept): "
                 "give a better start, or frames with structure at several distances")
-    out.T = T[0]
-    out.evaluations = evals[0]
-    return out
+    return {"T": T, "kept": {"f": out.basins[0]["f"], "photo": out.basins[0]["photo"],
+                             "by": "photo" if out.disagree else "edges"}}
+
+
 
 
 def _search_axes(mr) -> np.ndarray:
