@@ -7,16 +7,22 @@ little scores nearly as well), and no amount of search fixes that. Motion does n
 failure: the camera's direction of travel (visual odometry) is the LiDAR's (LiDAR odometry)
 turned by the extrinsic's rotation, whatever the translation, so a recording that moves gives two
 of the three angles to a fraction of a degree (:func:`paretocal.egomotion.rotation_from_motion`;
-all three when it turns). With those two angles held near the motion's, the edge objective's
-optimum over what is left, the angle about the direction of travel and the camera's position
-within the stated error, is the truth on every KITTI start measured (README, *Wide starts*),
-provided the search visits it: its basin is narrow along the camera's optical axis, where a
-wrong pose far along that axis has a wide one. So the search is stratified along the optical
-axis: a differential evolution (scipy) in each slice of :data:`STRATUM_SHARE` of the stated
-translation error, over the free angle, the two lateral offsets, the slice's depth and the
-two motion angles within their uncertainty; the best of each slice are polished in all six
-degrees of freedom and the best polished pose is the start of the usual calibration, with a
-narrower stated error (:data:`AFTER_DEG`, :data:`AFTER_M`).
+all three when it turns). With those two angles held near the motion's, the edge objective
+is searched over what is left: the angle about the direction of travel and the camera's
+position within the stated error. Its basin there is narrow along the camera's optical axis,
+where a wrong pose metres along that axis has a wide one, so the search is stratified along the
+optical axis: a differential evolution (scipy) in each slice of :data:`STRATUM_SHARE` of the
+stated translation error, over the free angle, the two lateral offsets, the slice's depth and
+the two motion angles within their disagreement. The best slices are polished in all six
+degrees of freedom. Photo-consistency across the frames (:mod:`paretocal.objective.photo`, an
+objective that shares no feature with the edges) chooses between polished poses in distinct
+basins, which the edges can confuse and it does not; the edge objective chooses within one.
+
+The points a search compares are chosen at its start, and from a start metres off they are not
+those the truth sees: scored with points chosen at each pose's own view, the truth wins by a wide
+margin where, with the start's points, a wrong pose can win. So the search runs in rounds, each
+from the pose the last one kept, until two agree (at most :data:`ROUNDS`). The pose kept starts
+the usual calibration, with a narrower stated error (:data:`AFTER_DEG`, :data:`AFTER_M`).
 
 The stage applies only when the stated initial error is wide (:func:`wanted`: beyond
 :data:`WIDE_DEG` or :data:`WIDE_M`, the box the search alone has been measured in) and the
