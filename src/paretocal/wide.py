@@ -234,7 +234,6 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     WideStart
         ``T`` None, with reasons, when the stage cannot apply.
     """
-
     T0 = np.asarray(T_init, dtype=np.float64)
     out = WideStart(None, T0.copy())
     if len(frames) < MIN_FRAMES:
@@ -283,30 +282,28 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
         return out
     out.reasons += [r for r in mr.reasons if "not observed" in r]
 
+    # The photo-consistency map, from a seeded sample of each sweep (projecting every return
+    # of every sweep into every frame to choose the map would cost seconds).
+    t3 = time.perf_counter()
+    rng = np.random.default_rng(s.seed)
+    per = 4 * PHOTO_POINTS // len(frames)
+    sample = [f.points if len(f.points) <= per
+              else f.points[np.sort(rng.choice(len(f.points), per, replace=False))]
+              for f in frames]
+    scene = build_photo_scene(sample, lo.poses, [f.image for f in frames],
+                              [f.camera for f in frames], view=_motion_start(mr, T0),
+                              max_points=PHOTO_POINTS, rng=s.seed)
+    out.seconds["photo"] = time.perf_counter() - t3
     # Rounds: the search from the start, then again from the pose it kept (the points are
     # chosen at the motion's rotation with the start's camera centre, so a start metres off
     # sees other points than the truth does: a second look from the first answer sees what
     # the truth sees). Photo-consistency is scored on one map for every round.
-    scene = None
     T_start, previous = T0, None
     for r in range(ROUNDS):
         mr_r = mr if r == 0 else rotation_from_motion(lo, pairs_out, T_start[:3, :3],
                                                       T_start[:3, 3],
                                                       t_sigma_m=s.init_error_m)
         Tm = _motion_start(mr_r, T_start)
-        if scene is None:
-            t3 = time.perf_counter()
-            # The map from a seeded sample of each sweep (projecting every return of every
-            # sweep into every frame to choose the map would cost seconds).
-            rng = np.random.default_rng(s.seed)
-            per = 4 * PHOTO_POINTS // len(frames)
-            sample = [f.points if len(f.points) <= per
-                      else f.points[np.sort(rng.choice(len(f.points), per, replace=False))]
-                      for f in frames]
-            scene = build_photo_scene(sample, lo.poses,
-                                      [f.image for f in frames], [f.camera for f in frames],
-                                      view=Tm, max_points=PHOTO_POINTS, rng=s.seed)
-            out.seconds["photo"] = time.perf_counter() - t3
         found = _search_round(frames, rings, settings, Tm, mr_r, T_start, scene, out,
                               progress)
         out.rounds.append({"start_deg": round(float(pose_error(T_start, T0)["rotation_deg"]),
