@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -277,6 +278,11 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                   "standing_pairs": int(np.sum(lo.standing))}
     if not mr.usable:
         out.reasons += list(mr.reasons)
+        why = Counter(p.reason.split(":")[0].split(" (")[0] for p in pairs_out if p.reason)
+        if why:
+            out.reasons.append(f"camera pairs {len(pairs_out)} (frames {pairs[0][1] - pairs[0][0]}"
+                               " or more apart), none with a direction of travel: "
+                               + ", ".join(f"{k} x{n}" for k, n in why.most_common()))
         out.reasons.append("the motion gives no rotation: give a start within "
                            f"{WIDE_DEG:g} deg / {WIDE_M:g} m")
         return out
