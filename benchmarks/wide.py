@@ -73,7 +73,8 @@ def main(argv=None) -> int:
                "cm": None if e is None else float(e["translation_cm"]),
                "rounds": len(w.rounds), "kept_by": [r["kept"]["by"] for r in w.rounds],
                "ambiguous": w.ambiguous, "disagree": w.disagree, "wall_s": wall,
-               "seconds": w.seconds, "evaluations": w.evaluations, "reasons": w.reasons}
+               "seconds": w.seconds, "evaluations": w.evaluations,
+               "reasons": w.to_dict()["reasons"]}
         rows.append(row)
         got = ("not applied: " + "; ".join(w.reasons)) if e is None else (
             f"{row['deg']:.2f} deg {row['cm']:.1f} cm, {row['rounds']} round(s) "

@@ -678,7 +678,7 @@ def _fake_result(**over):
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
                         feature_counts=over.pop("feature_counts", {}),
-                        evidence=over.pop("evidence", None),
+                        evidence=over.pop("evidence", None), wide=over.pop("wide", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
                                                             "init_error_deg": deg,
                                                             "init_error_m": m}))
@@ -720,6 +720,11 @@ def _fake_result(**over):
     ({"evidence": {"contrast": {"frames_clear": 1.0, "z": 2.4}}},
      "images and clouds barely agree: the result fits the image edges only 2.4 spreads better"),
     ({"evidence": {"contrast": {"frames_clear": 0.95, "z": 5.0}}}, None),
+    # The wide start's ambiguity is the verdict's; its disagreement alone is not.
+    ({"wide": {"applied": True, "ambiguity": "the wide search found two poses 2.9 deg / 203 cm "
+               "apart that the frames do not tell apart"}},
+     "the wide search found two poses 2.9 deg / 203 cm apart"),
+    ({"wide": {"applied": True, "ambiguity": None, "disagree": True}}, None),
     # The jackknife of the intervals (at the local optimum) decides when there is one.
     ({"quality": {"jackknife_se": {"x": 0.1, "y": 0.1, "z": 13.6, "yaw": 0.1, "pitch": 0.1,
                                    "roll": 0.1}},

@@ -474,8 +474,8 @@ def reliability(result: "CalibrationResult") -> dict:
         reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
                        f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
     wide = getattr(result, "wide", None) or {}
-    if wide.get("ambiguous"):
-        reasons += [r for r in wide.get("reasons", []) if r.startswith("the wide search")]
+    if wide.get("ambiguity"):
+        reasons.append(wide["ambiguity"])
     s = result.settings.search
     bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
     x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)

@@ -32,7 +32,6 @@ of travel both sensors resolve), and the calibration goes on from the start as g
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from collections import Counter
@@ -49,7 +48,6 @@ from .quality import local_optimum
 from .search.basin import AMBIGUOUS_P, USABLE_DEG, USABLE_M, paired_preference
 from .stage import Stage
 
-log = logging.getLogger(__name__)
 
 #: The stage runs (``search.wide = "auto"``) when the stated initial error exceeds these (deg,
 #: m): the box the search alone reaches the truth from (20 of 20 KITTI starts from +-10 deg /
@@ -107,7 +105,7 @@ class WideStart:
     T_given : ndarray, shape (4, 4)
         The start given.
     reasons : list of str
-        Why the stage could not apply, or what it leaves open, in words.
+        Why the stage could not apply, or what the motion leaves open, in words.
     motion : dict
         Directions and turns used, reversed pairs, the free axis (LiDAR frame), the motion
         rotation's change from the start (deg) and its residual (deg), the pairs' stride.
@@ -115,13 +113,14 @@ class WideStart:
         The polished poses, the one kept first: ``f`` (the edge objective, px), ``photo``
         (the photo-consistency cost), ``separation_deg`` and ``separation_cm`` from the one
         kept, ``T``.
-    disagree : bool
-        The edge objective's best pose and the photo-consistent one lie in distinct basins
-        (:data:`PHOTO_DISTINCT_M`, :data:`PHOTO_DISTINCT_DEG`): the photo-consistent one is
-        kept.
-    ambiguous : bool
-        The best and a distinct runner-up (more than 1 deg or 10 cm apart) are not told apart
-        by the frames (paired test, p >= 0.05).
+    disagreement : str or None
+        In words, when the last round's edge objective and photo-consistency preferred poses
+        in distinct basins (:data:`PHOTO_DISTINCT_M`, :data:`PHOTO_DISTINCT_DEG`): the
+        photo-consistent one is kept.
+    ambiguity : str or None
+        In words, when the last round's pose kept and a distinct runner-up (more than 1 deg
+        or 10 cm apart) are not told apart by the frames (paired test, p >= 0.05): the
+        verdict's reason.
     evaluations : int
         Objective evaluations of the search and the polish.
     seconds : dict
@@ -133,8 +132,8 @@ class WideStart:
     reasons: list = field(default_factory=list)
     motion: dict = field(default_factory=dict)
     basins: list = field(default_factory=list)
-    ambiguous: bool = False
-    disagree: bool = False
+    disagreement: str | None = None
+    ambiguity: str | None = None
     comparison: dict | None = None
     evaluations: int = 0
     seconds: dict = field(default_factory=dict)
@@ -144,16 +143,25 @@ class WideStart:
     def applied(self) -> bool:
         return self.T is not None
 
+    @property
+    def disagree(self) -> bool:
+        return self.disagreement is not None
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.ambiguity is not None
+
     def to_dict(self) -> dict:
         """For result.json: plain numbers and lists."""
         moved = pose_error(self.T, self.T_given) if self.T is not None else None
-        return {"applied": self.applied, "reasons": list(self.reasons),
+        found = [r for r in (self.disagreement, self.ambiguity) if r]
+        return {"applied": self.applied, "reasons": list(self.reasons) + found,
                 "T_given": np.asarray(self.T_given).tolist(),
                 "T_found": None if self.T is None else np.asarray(self.T).tolist(),
                 "moved_deg": None if moved is None else round(float(moved["rotation_deg"]), 3),
                 "moved_cm": None if moved is None else round(float(moved["translation_cm"]), 2),
                 "motion": self.motion, "basins": self.basins, "ambiguous": self.ambiguous,
-                "disagree": self.disagree, "rounds": self.rounds,
+                "ambiguity": self.ambiguity, "disagree": self.disagree, "rounds": self.rounds,
                 "comparison": self.comparison, "evaluations": int(self.evaluations),
                 "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
 
@@ -338,7 +346,8 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                   scene, out: WideStart, progress) -> dict:
     """One round of the stratified search about ``Tm`` (the box about ``T_start``'s camera
     centre); the polished poses ``T`` (k, 4, 4), the one kept first, and what was kept.
-    Fills ``out``'s basins, comparison, reasons and counters."""
+    Sets ``out``'s basins, comparison, disagreement and ambiguity to the round's and adds to
+    its counters."""
     from scipy.optimize import differential_evolution
     from scipy.spatial.transform import Rotation
 
@@ -406,8 +415,8 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     far = [k for k, e in enumerate(sep) if e["translation_cm"] > 100 * PHOTO_DISTINCT_M
            or e["rotation_deg"] > PHOTO_DISTINCT_DEG]
     pick = min(far, key=lambda k: pc[k]) if far else 0
-    out.disagree = bool(far and pc[pick] < pc[0])
-    if out.disagree:
+    disagree = bool(far and pc[pick] < pc[0])
+    if disagree:
         order = [pick] + [k for k in range(len(T)) if k != pick]
         Z, f, T, pc = Z[order], f[order], T[order], pc[order]
     out.basins = []
@@ -417,12 +426,10 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                            "separation_deg": round(float(e["rotation_deg"]), 3),
                            "separation_cm": round(float(e["translation_cm"]), 2),
                            "T": np.round(Tk, 6).tolist()})
-    out.ambiguous, out.comparison = False, None
-    out.reasons = [r for r in out.reasons if not r.startswith(("the wide search",
-                                                               "the edge objective and"))]
-    if out.disagree:
+    out.disagreement = out.ambiguity = out.comparison = None
+    if disagree:
         e, k = out.basins[1], out.basins[0]
-        out.reasons.append(
+        out.disagreement = (
             f"the edge objective and photo-consistency prefer poses {e['separation_deg']:.1f} "
             f"deg / {e['separation_cm']:.0f} cm apart; the photo-consistent one is kept "
             f"(photo {k['photo']:.3f} against {e['photo']:.3f})")
@@ -435,17 +442,14 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                           for k, v in cmp.items()}
         p = cmp["p"]
         if not (np.isfinite(p) and p < AMBIGUOUS_P):
-            out.ambiguous = True
             b = out.basins[rival]
-            out.reasons.append(
+            out.ambiguity = (
                 f"the wide search found two poses {b['separation_deg']:.1f} deg / "
                 f"{b['separation_cm']:.0f} cm apart that the frames do not tell apart "
                 f"({cmp['frames_far_better']} of {cmp['frames']} frames prefer the one kept): "
                 "give a better start, or frames with structure at several distances")
     return {"T": T, "kept": {"f": out.basins[0]["f"], "photo": out.basins[0]["photo"],
-                             "by": "photo" if out.disagree else "edges"}}
-
-
+                             "by": "photo" if disagree else "edges"}}
 
 
 def _search_axes(mr) -> np.ndarray:
