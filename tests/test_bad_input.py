@@ -451,6 +451,7 @@ def test_n_range_beyond_what_the_frames_hold(capfd, tmp_path, rig, args, expect)
     ("camera: two\n", "camera: expected a whole number, got 'two'"),
     ("frames: [1, 2]\n", "frames: expected a string or null, got [1, 2]"),
     ("features: {blur_sigma: -3}\n", "features: blur_sigma must not be negative"),
+    ("features: {canny_noise: 0}\n", "canny_noise 0.0: must be positive"),
     ("search: {seed: -1}\n", "--seed -1: must be 0 or more"),
     ("decision: {refine: maybe}\n", "decision.refine: expected true or false, got 'maybe'"),
     ("1: 2\n", "unknown section(s) 1"),

@@ -153,3 +153,20 @@ def test_relative_canny_thresholds_follow_the_exposure(raw_frames, rng):
     # Pure noise of a dark exposure makes no edges: the thresholds stay above the noise.
     noise = np.clip(rng.normal(40, 3, img.shape[:2]), 0, 255).astype(np.uint8)
     assert (edge_map(noise, relative=True) > 0).sum() < 0.001 * noise.size
+
+
+def test_noise_relative_canny_thresholds_keep_a_dim_images_edges(raw_frames, rng):
+    from paretocal.features.image import edge_map, gradient_noise
+
+    img = raw_frames[0].image
+    full = (edge_map(img, noise_sigmas=13.0) > 0).sum()
+    # A dim, low-contrast exposure of the same scene with its own sensor noise: thresholds in
+    # noise deviations keep its edges; fixed ones lose most of them.
+    dim = np.clip(img.astype(np.float64) * 0.3 + rng.normal(0, 0.5, img.shape), 0, 255)
+    dim = dim.round().astype(np.uint8)
+    assert (edge_map(dim) > 0).sum() < 0.3 * full
+    assert (edge_map(dim, noise_sigmas=13.0) > 0).sum() > 0.5 * full
+    # The threshold follows the noise: on noise alone almost nothing is an edge.
+    noise = np.clip(rng.normal(40, 6, img.shape[:2]), 0, 255).astype(np.uint8)
+    assert gradient_noise(noise) > 0
+    assert (edge_map(noise, noise_sigmas=13.0) > 0).sum() < 0.001 * noise.size

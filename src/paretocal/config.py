@@ -31,6 +31,9 @@ class FeatureSettings:
     canny_high: float = 150.0
     canny_relative: bool = False     #: thresholds for a full-range image, scaled by exposure
     equalize: bool = False           #: local contrast equalised (CLAHE) before Canny
+    #: Canny's high threshold as this many noise deviations of the image's gradient (the low
+    #: one keeps its ratio); None: the thresholds above.
+    canny_noise: float | None = None
     min_edge_px: int = 0             #: drop edge fragments smaller than this (px)
     depth_jump_m: float = 1.0        #: along-ring range jump for a depth edge (m)
     cross_ring: bool = True          #: also detect edges against the rings above and below
@@ -325,6 +328,9 @@ def _check_features(f: FeatureSettings) -> None:
                             "need 0 <= min_range_m < max_range_m")
     if not f.z_min > 0:
         raise SettingsError(f"z_min {f.z_min}: must be positive (metres in front of the camera)")
+    if f.canny_noise is not None and not f.canny_noise > 0:
+        raise SettingsError(f"canny_noise {f.canny_noise}: must be positive (noise deviations "
+                            "of the image's gradient)")
     negative = [k for k in ("blur_sigma", "min_edge_px", "depth_jump_m", "cross_jump_m",
                             "cross_jump_rel", "intensity_jump", "smooth_ratio",
                             "view_margin_px") if (getattr(f, k) or 0) < 0]

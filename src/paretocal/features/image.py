@@ -68,12 +68,7 @@ def canny_thresholds(gray: np.ndarray, low: float, high: float,
         return low, high
     white = float(np.percentile(usable, WHITE_PERCENTILE))
     scale = min(1.0, max(white, 1.0) / 255.0)
-    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0)
-    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1)
-    g = np.hypot(gx, gy)
-    sigma_g = float(np.median(g if mask is None else g[np.asarray(mask, dtype=bool)])) \
-        / RAYLEIGH_MEDIAN
-    floor = NOISE_SIGMAS * sigma_g
+    floor = NOISE_SIGMAS * gradient_noise(gray, mask)
     hi = max(high * scale, min(high, floor))
     return hi * low / high, hi
 
@@ -84,6 +79,17 @@ CLAHE_CLIP = 2.0
 CLAHE_TILES = 8
 
 
+def gradient_noise(gray: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """The noise deviation of the Sobel gradient magnitude of ``gray`` (H, W), from its median
+    over the usable pixels (a Rayleigh median; an upper bound in natural images, where most
+    pixels are flat)."""
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1)
+    g = np.hypot(gx, gy)
+    usable = g if mask is None else g[np.asarray(mask, dtype=bool)]
+    return float(np.median(usable)) / RAYLEIGH_MEDIAN if usable.size else 0.0
+
+
 def equalize_contrast(gray: np.ndarray) -> np.ndarray:
     """Contrast-limited adaptive histogram equalisation of a grey image (H, W) uint8."""
     return cv2.createCLAHE(clipLimit=CLAHE_CLIP,
@@ -92,7 +98,8 @@ def equalize_contrast(gray: np.ndarray) -> np.ndarray:
 
 def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
              canny_high: float = 150.0, min_edge_px: int = 0, relative: bool = False,
-             mask: np.ndarray | None = None, equalize: bool = False) -> np.ndarray:
+             mask: np.ndarray | None = None, equalize: bool = False,
+             noise_sigmas: float | None = None) -> np.ndarray:
     """Canny edges of a Gaussian-blurred grey image.
 
     Parameters
@@ -112,6 +119,11 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
     equalize : bool
         Equalise local contrast first (CLAHE, :func:`equalize_contrast`): structure in dark
         or flat parts of the image (night scenes, shadows) reaches the thresholds.
+    noise_sigmas : float, optional
+        The high threshold is this many noise deviations of the blurred image's gradient
+        (:func:`gradient_noise`), the low one keeps its ratio to it (``canny_low /
+        canny_high``): a dim, low-contrast image keeps its silhouettes, a noisy one does not
+        turn noise into edges. Replaces ``relative``.
 
     Returns
     -------
@@ -122,7 +134,10 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
         gray = equalize_contrast(gray)
     if blur_sigma > 0:
         gray = cv2.GaussianBlur(gray, (0, 0), blur_sigma)
-    if relative:
+    if noise_sigmas is not None:
+        high = noise_sigmas * gradient_noise(gray, mask)
+        canny_low, canny_high = high * canny_low / canny_high, high
+    elif relative:
         canny_low, canny_high = canny_thresholds(gray, canny_low, canny_high, mask)
     edges = cv2.Canny(gray, canny_low, canny_high, L2gradient=True)
     if min_edge_px > 1:
@@ -157,16 +172,18 @@ def drop_masked_edges(edges: np.ndarray, mask: np.ndarray, blur_sigma: float) ->
 def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 50.0,
                    canny_high: float = 150.0, truncation_px: float = 10.0,
                    min_edge_px: int = 0, mask: np.ndarray | None = None,
-                   relative: bool = False, equalize: bool = False) -> ImageFeatures:
+                   relative: bool = False, equalize: bool = False,
+                   noise_sigmas: float | None = None) -> ImageFeatures:
     """Edge map, truncated distance transform and edge pixel list of one image.
 
     ``mask`` (H, W) bool, True on usable pixels: edges on or near masked pixels are dropped
     before the distance transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over
     the usable pixels. ``relative``: thresholds scaled to the image's exposure
-    (:func:`canny_thresholds`); ``equalize``: local contrast equalised first.
+    (:func:`canny_thresholds`); ``equalize``: local contrast equalised first; ``noise_sigmas``:
+    thresholds from the image's gradient noise (:func:`edge_map`).
     """
     edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px, relative, mask,
-                     equalize)
+                     equalize, noise_sigmas)
     if mask is not None:
         edges = drop_masked_edges(edges, mask, blur_sigma)
     v, u = np.nonzero(edges)

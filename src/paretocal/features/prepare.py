@@ -154,7 +154,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     img = image if image is not None else image_features(
         frame.image, features.blur_sigma, features.canny_low, features.canny_high,
         objective.truncation_px, features.min_edge_px, mask=frame.mask,
-        relative=features.canny_relative, equalize=features.equalize)
+        relative=features.canny_relative, equalize=features.equalize,
+        noise_sigmas=features.canny_noise)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.
