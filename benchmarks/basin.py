@@ -25,6 +25,15 @@ and few neighbours better. ::
 
 ``--config`` takes a settings file (as ``paretocal calibrate --config``), so an objective
 variant is measured without touching the defaults.
+
+``--joint SET,SET,...`` also measures the cameras of one rig at once: one correction in the
+LiDAR frame shared by every camera (``T_cam_lidar @ D(d)`` for each keeps the camera-to-camera
+extrinsics), the objective the sum of the cameras' objectives, each over its own set's frames
+and points; local optimum and basin centre as above (the sets must share the LiDAR's clouds
+and frame, e.g. PandaSet's three cameras)::
+
+    .venv/bin/python benchmarks/basin.py --sets pandaset_front,pandaset_left,pandaset_front_left \
+        --groups all --joint pandaset_front,pandaset_left,pandaset_front_left
 """
 
 from __future__ import annotations
@@ -45,6 +54,7 @@ from paretocal.inputs import prepare_lidar
 from paretocal.io import load_frames
 from paretocal.quality import (correction_between, displacement_px, local_optimum,
                                neighbour_fraction)
+from paretocal.search.polish import newton_polish, polish
 from paretocal.stage import Stage
 
 DATA = Path(os.environ.get("PARETOCAL_DATA", Path(__file__).resolve().parents[1].parent
@@ -110,6 +120,49 @@ def basin(frames, T_ref: np.ndarray, settings: Settings, rings=None) -> dict:
                                  for g in counts[0]}}
 
 
+def joint_basin(names: list[str], settings: Settings) -> dict:
+    """The basin at the reference of several cameras sharing one LiDAR correction: the sum of
+    their objectives (each at all its points), polished from the reference and from the
+    :data:`STARTS` starts of :func:`basin` (Newton, then a pattern search, as
+    :func:`~paretocal.quality.local_optimum`). Keys as :func:`basin`'s, without ``px``."""
+    stages = []
+    for name in names:
+        folder, spec, cam = SETS[name]
+        frames = load_frames(DATA / folder, spec, cam)
+        T_ref = frames[0].T_ref
+        steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])
+        stages.append((Stage(steps.frames, T_ref, T_ref, settings, rings=steps.rings), T_ref))
+
+    def f1(Z):
+        total = np.zeros(len(Z))
+        for st, _ in stages:
+            X = np.array(Z, dtype=np.float64)
+            X[:, 6] = st.n_max
+            total += st.objective.chamfer(X, ucb_k=0.0)["f1"]
+        return total
+
+    x0 = np.zeros(7)
+    frac, _ = neighbour_fraction(type("Joint", (), {"chamfer": lambda self, X, ucb_k: {
+        "f1": f1(X)}})(), x0, NEIGHBOUR_STEP)
+    S = np.tile(x0, (STARTS + 1, 1))
+    S[1:, :6] += np.random.default_rng(0).uniform(-1.0, 1.0, (STARTS, 6)) * START_BOX
+    Z, _, _ = newton_polish(f1, S, iters=15)
+    Z, _, _ = polish(f1, Z, step=np.array([0.005] * 3 + [0.05] * 3))
+    T_ref = stages[0][1]
+    # A correction on the right: rotation and translation errors are the same for every camera.
+    T_opt = [T_ref @ correction_matrix(z[:6]) for z in Z]
+    e = pose_error(T_opt[0], T_ref)
+    centre = T_ref @ correction_matrix(Z[:, :6].mean(axis=0))
+    c = pose_error(centre, T_ref)
+    spread = [pose_error(T, centre) for T in T_opt]
+    return {"deg": float(e["rotation_deg"]), "cm": float(e["translation_cm"]),
+            "better": float(frac),
+            "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
+            "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
+            "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
+            "correction": [round(float(v), 5) for v in Z[0, :6]]}
+
+
 def measure(name: str, settings: Settings, groups: list[str], single: bool) -> dict:
     folder, spec, cam = SETS[name]
     frames = load_frames(DATA / folder, spec, cam)
@@ -157,6 +210,7 @@ def main(argv=None) -> int:
     ap.add_argument("--single", action="store_true", help="also each frame alone")
     ap.add_argument("--config", type=Path, help="settings file (YAML/JSON) by section")
     ap.add_argument("--json", type=Path, help="write the results here")
+    ap.add_argument("--joint", help="comma-separated sets of one rig, measured at once")
     a = ap.parse_args(argv)
     settings = load_settings(a.config)
     results = {}
@@ -171,6 +225,16 @@ def main(argv=None) -> int:
                   f"{row['centre_cm']:.1f} cm, {100 * row['better']:.0f} % better, correction "
                   f"{row['correction']}, points {row['points_per_frame']}", file=sys.stderr)
     print(table(results))
+    if a.joint:
+        names = a.joint.split(",")
+        t0 = time.perf_counter()
+        j = joint_basin(names, settings)
+        results["joint"] = {"sets": names, **j}
+        print(f"\njoint ({', '.join(names)}): optimum {j['deg']:.2f} deg / {j['cm']:.1f} cm, "
+              f"centre {j['centre_deg']:.2f} / {j['centre_cm']:.1f}, spread "
+              f"{j['spread_deg']:.2f} / {j['spread_cm']:.1f}, {100 * j['better']:.0f} % "
+              f"neighbours better, correction {j['correction']} "
+              f"({time.perf_counter() - t0:.0f} s)")
     if a.json:
         a.json.parent.mkdir(parents=True, exist_ok=True)
         a.json.write_text(json.dumps(results, indent=1) + "\n")
