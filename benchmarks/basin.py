@@ -120,18 +120,28 @@ def basin(frames, T_ref: np.ndarray, settings: Settings, rings=None) -> dict:
                                  for g in counts[0]}}
 
 
-def joint_basin(names: list[str], settings: Settings) -> dict:
-    """The basin at the reference of several cameras sharing one LiDAR correction: the sum of
-    their objectives (each at all its points), polished from the reference and from the
+def load_set(name: str, settings: Settings):
+    """A development set's frames after the LiDAR steps, its reference and its rings."""
+    folder, spec, cam = SETS[name]
+    frames = load_frames(DATA / folder, spec, cam)
+    T_ref = frames[0].T_ref
+    steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])
+    return steps.frames, T_ref, steps.rings
+
+
+def joint_basin(parts: list, settings: Settings) -> dict:
+    """The basin of several cameras sharing one LiDAR correction, each at its own pose.
+
+    ``parts``: one ``(frames, T, rings)`` per camera (as :func:`load_set` returns), ``T`` the
+    camera's pose the correction is measured from (the reference). The objective is the sum of
+    the cameras' objectives (each at all its points), polished from ``T`` and from the
     :data:`STARTS` starts of :func:`basin` (Newton, then a pattern search, as
-    :func:`~paretocal.quality.local_optimum`). Keys as :func:`basin`'s, without ``px``."""
-    stages = []
-    for name in names:
-        folder, spec, cam = SETS[name]
-        frames = load_frames(DATA / folder, spec, cam)
-        T_ref = frames[0].T_ref
-        steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])
-        stages.append((Stage(steps.frames, T_ref, T_ref, settings, rings=steps.rings), T_ref))
+    :func:`~paretocal.quality.local_optimum`). Keys as :func:`basin`'s, without ``px`` and
+    ``points_per_frame``, with ``value`` (the summed objective at the local optimum); errors
+    are those of the first camera (a correction on the right turns and moves every camera
+    alike).
+    """
+    stages = [(Stage(frames, T, T, settings, rings=rings), T) for frames, T, rings in parts]
 
     def f1(Z):
         total = np.zeros(len(Z))
@@ -141,9 +151,12 @@ def joint_basin(names: list[str], settings: Settings) -> dict:
             total += st.objective.chamfer(X, ucb_k=0.0)["f1"]
         return total
 
+    class Summed:  # the one method neighbour_fraction calls
+        def chamfer(self, X, ucb_k=0.0):
+            return {"f1": f1(X)}
+
     x0 = np.zeros(7)
-    frac, _ = neighbour_fraction(type("Joint", (), {"chamfer": lambda self, X, ucb_k: {
-        "f1": f1(X)}})(), x0, NEIGHBOUR_STEP)
+    frac, _ = neighbour_fraction(Summed(), x0, NEIGHBOUR_STEP)
     S = np.tile(x0, (STARTS + 1, 1))
     S[1:, :6] += np.random.default_rng(0).uniform(-1.0, 1.0, (STARTS, 6)) * START_BOX
     Z, _, _ = newton_polish(f1, S, iters=15)
@@ -160,7 +173,8 @@ def joint_basin(names: list[str], settings: Settings) -> dict:
             "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
             "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
             "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
-            "correction": [round(float(v), 5) for v in Z[0, :6]]}
+            "correction": [round(float(v), 5) for v in Z[0, :6]],
+            "value": float(f1(Z[:1])[0])}
 
 
 def measure(name: str, settings: Settings, groups: list[str], single: bool) -> dict:
@@ -168,7 +182,7 @@ def measure(name: str, settings: Settings, groups: list[str], single: bool) -> d
     frames = load_frames(DATA / folder, spec, cam)
     T_ref = frames[0].T_ref
     t0 = time.perf_counter()
-    steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])
+    steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])  # as load_set
     out = {"frames": len(frames), "lidar_pose": steps.lidar_info.get("source"),
            "rings": sorted({int(r.n_rings) for r in steps.rings}),
            "purity": round(float(min(r.purity for r in steps.rings)), 3), "groups": {}}
@@ -228,7 +242,7 @@ def main(argv=None) -> int:
     if a.joint:
         names = a.joint.split(",")
         t0 = time.perf_counter()
-        j = joint_basin(names, settings)
+        j = joint_basin([load_set(n, settings) for n in names], settings)
         results["joint"] = {"sets": names, **j}
         print(f"\njoint ({', '.join(names)}): optimum {j['deg']:.2f} deg / {j['cm']:.1f} cm, "
               f"centre {j['centre_deg']:.2f} / {j['centre_cm']:.1f}, spread "

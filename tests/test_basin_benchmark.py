@@ -31,6 +31,24 @@ def test_the_basin_is_at_the_reference_and_not_at_a_pose_beside_it(basin_bench, 
     assert abs(off["correction"][3] + 1.5) < 0.4 and np.isfinite(off["px"])
 
 
+def test_cameras_measured_at_once_share_one_correction(basin_bench, raw_frames):
+    """One camera given twice is that camera's basin (the sum doubles the objective: Newton
+    steps and comparisons do not change); two cameras both 1.5 deg off in yaw are corrected
+    together by one shared correction of -1.5 deg."""
+    frames = raw_frames[::4]
+    T = frames[0].T_ref
+    one = basin_bench.basin(frames, T, Settings())
+    twice = basin_bench.joint_basin([(frames, T, None), (frames, T, None)], Settings())
+    assert np.allclose(twice["correction"], one["correction"], atol=1e-4)
+    alone = basin_bench.joint_basin([(frames, T, None)], Settings())
+    assert np.isclose(twice["value"], 2 * alone["value"])
+    assert twice["deg"] < 0.4 and twice["cm"] < 4 and twice["better"] <= 0.05
+    T_off = T @ correction_matrix([0, 0, 0, 1.5, 0, 0])
+    both = basin_bench.joint_basin([(frames, T_off, None), (frames[1:], T_off, None)],
+                                   Settings())
+    assert abs(both["correction"][3] + 1.5) < 0.4 and 1.0 < both["deg"] < 2.0
+
+
 def test_the_table_has_a_row_per_set_and_group(basin_bench):
     row = {"deg": 0.1, "cm": 1.0, "px": 2.0, "better": 0.01, "centre_deg": 0.12,
            "centre_cm": 1.1, "spread_deg": 0.05, "spread_cm": 0.5, "correction": [0] * 6,
