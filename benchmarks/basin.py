@@ -102,37 +102,43 @@ def basin(frames, T_ref: np.ndarray, settings: Settings, rings=None) -> dict:
     S = np.tile(x0, (STARTS + 1, 1))
     S[1:, :6] += np.random.default_rng(0).uniform(-1.0, 1.0, (STARTS, 6)) * START_BOX
     Z = local_optimum(obj, S)                       # every start polished in one batch
-    T_opt = obj.transforms(Z)
-    e = pose_error(T_opt[0], T_ref)
-    d = np.array([correction_between(T_ref, T) for T in T_opt])
-    centre = T_ref @ correction_matrix(d.mean(axis=0))
-    c = pose_error(centre, T_ref)
-    # How far the optima lie from their centre: where the objective is flat they scatter.
-    spread = [pose_error(T, centre) for T in T_opt]
+    d = np.array([correction_between(T_ref, T) for T in obj.transforms(Z)])
     counts = [f.counts() for f in stage.feats]
-    return {"deg": float(e["rotation_deg"]), "cm": float(e["translation_cm"]),
-            "px": float(displacement_px(obj, x0, Z[0])), "better": float(frac),
-            "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
-            "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
-            "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
-            "correction": [round(float(v), 5) for v in d[0]],
+    return {**_optima(T_ref, d), "px": float(displacement_px(obj, x0, Z[0])),
+            "better": float(frac),
             "points_per_frame": {g: round(float(np.mean([c[g] for c in counts])), 1)
                                  for g in counts[0]}}
 
 
+def _optima(T_ref: np.ndarray, d: np.ndarray) -> dict:
+    """The local optima's corrections ``d`` (k, 6) from ``T_ref``, the first polished from
+    ``T_ref`` itself: its error, the centre of all k, and their median distance from it."""
+    T_opt = [T_ref @ correction_matrix(v) for v in d]
+    e = pose_error(T_opt[0], T_ref)
+    centre = T_ref @ correction_matrix(d.mean(axis=0))
+    c = pose_error(centre, T_ref)
+    # How far the optima lie from their centre: where the objective is flat they scatter.
+    spread = [pose_error(T, centre) for T in T_opt]
+    return {"deg": float(e["rotation_deg"]), "cm": float(e["translation_cm"]),
+            "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
+            "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
+            "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
+            "correction": [round(float(v), 5) for v in d[0]]}
+
+
 def load_set(name: str, settings: Settings):
-    """A development set's frames after the LiDAR steps, its reference and its rings."""
+    """A development set's LiDAR steps (its frames after them, rings, LiDAR pose) and its
+    reference."""
     folder, spec, cam = SETS[name]
     frames = load_frames(DATA / folder, spec, cam)
     T_ref = frames[0].T_ref
-    steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])
-    return steps.frames, T_ref, steps.rings
+    return prepare_lidar(frames, settings, [(frames[0].camera, T_ref)]), T_ref
 
 
 def joint_basin(parts: list, settings: Settings) -> dict:
     """The basin of several cameras sharing one LiDAR correction, each at its own pose.
 
-    ``parts``: one ``(frames, T, rings)`` per camera (as :func:`load_set` returns), ``T`` the
+    ``parts``: one ``(frames, T, rings)`` per camera (from :func:`load_set`), ``T`` the
     camera's pose the correction is measured from (the reference). The objective is the sum of
     the cameras' objectives (each at all its points), polished from ``T`` and from the
     :data:`STARTS` starts of :func:`basin` (Newton, then a pattern search, as
@@ -161,28 +167,15 @@ def joint_basin(parts: list, settings: Settings) -> dict:
     S[1:, :6] += np.random.default_rng(0).uniform(-1.0, 1.0, (STARTS, 6)) * START_BOX
     Z, _, _ = newton_polish(f1, S, iters=15)
     Z, _, _ = polish(f1, Z, step=np.array([0.005] * 3 + [0.05] * 3))
-    T_ref = stages[0][1]
     # A correction on the right: rotation and translation errors are the same for every camera.
-    T_opt = [T_ref @ correction_matrix(z[:6]) for z in Z]
-    e = pose_error(T_opt[0], T_ref)
-    centre = T_ref @ correction_matrix(Z[:, :6].mean(axis=0))
-    c = pose_error(centre, T_ref)
-    spread = [pose_error(T, centre) for T in T_opt]
-    return {"deg": float(e["rotation_deg"]), "cm": float(e["translation_cm"]),
-            "better": float(frac),
-            "centre_deg": float(c["rotation_deg"]), "centre_cm": float(c["translation_cm"]),
-            "spread_deg": float(np.median([e["rotation_deg"] for e in spread])),
-            "spread_cm": float(np.median([e["translation_cm"] for e in spread])),
-            "correction": [round(float(v), 5) for v in Z[0, :6]],
+    return {**_optima(stages[0][1], Z[:, :6]), "better": float(frac),
             "value": float(f1(Z[:1])[0])}
 
 
 def measure(name: str, settings: Settings, groups: list[str], single: bool) -> dict:
-    folder, spec, cam = SETS[name]
-    frames = load_frames(DATA / folder, spec, cam)
-    T_ref = frames[0].T_ref
     t0 = time.perf_counter()
-    steps = prepare_lidar(frames, settings, [(frames[0].camera, T_ref)])  # as load_set
+    steps, T_ref = load_set(name, settings)
+    frames = steps.frames
     out = {"frames": len(frames), "lidar_pose": steps.lidar_info.get("source"),
            "rings": sorted({int(r.n_rings) for r in steps.rings}),
            "purity": round(float(min(r.purity for r in steps.rings)), 3), "groups": {}}
@@ -242,7 +235,8 @@ def main(argv=None) -> int:
     if a.joint:
         names = a.joint.split(",")
         t0 = time.perf_counter()
-        j = joint_basin([load_set(n, settings) for n in names], settings)
+        parts = [(st.frames, T, st.rings) for st, T in (load_set(n, settings) for n in names)]
+        j = joint_basin(parts, settings)
         results["joint"] = {"sets": names, **j}
         print(f"\njoint ({', '.join(names)}): optimum {j['deg']:.2f} deg / {j['cm']:.1f} cm, "
               f"centre {j['centre_deg']:.2f} / {j['centre_cm']:.1f}, spread "
