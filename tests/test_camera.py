@@ -271,3 +271,30 @@ def test_project_a_batch_of_extrinsics_equals_one_at_a_time(make, rng):
         np.testing.assert_allclose(uv[c], uv1, rtol=0, atol=1e-9)
     uv34, _, _ = project(pts, cam, Ts[:, :3, :])
     np.testing.assert_array_equal(uv34, uv)
+
+
+def test_a_mounted_camera_projects_through_its_mount(rng):
+    """A camera with a mount M projects at ``M @ T`` (one extrinsic and a batch); the mount is
+    validated, read-only and written by ``to_dict``."""
+    import dataclasses
+
+    from paretocal.errors import InputError
+    from paretocal.geometry import decalibrate
+
+    cam = Camera(AIM_PIN_K, 1280, 704, "pinhole", AIM_PIN_D)
+    T0 = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+    M = decalibrate(np.eye(4), 30, 0.5, 3)[0]
+    mounted = dataclasses.replace(cam, mount=M)
+    pts = rng.uniform([-20, -20, -3], [20, 20, 3], size=(300, 3))
+    Ts = np.stack([decalibrate(T0, 10, 0.5, k)[0] for k in range(3)])
+    uv, z, vis = project(pts, mounted, Ts)
+    uv1, z1, vis1 = project(pts, cam, M @ Ts)
+    np.testing.assert_array_equal(vis, vis1)
+    np.testing.assert_allclose(uv, uv1, rtol=1e-12, atol=1e-9)    # far outside: large u, v
+    np.testing.assert_allclose(z, z1, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(project(pts, mounted, Ts[:, :3])[0], uv, rtol=1e-12, atol=1e-9)
+    assert cam.to_dict().get("mount") is None
+    np.testing.assert_allclose(mounted.to_dict()["mount"], M)
+    assert not mounted.mount.flags.writeable
+    with pytest.raises(InputError, match="mount"):
+        Camera(AIM_PIN_K, 1280, 704, mount=np.eye(3))

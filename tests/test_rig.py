@@ -133,11 +133,14 @@ def test_bad_rig_calib_exits_2(tmp_path, capsys, edit, words):
     (["--camera", "right"], ["--camera right", "front, left"]),
     (["--init", "x.yaml"], ["--init x.yaml", "--camera NAME"]),
     (["single"], ["--camera front: a KITTI camera index", "rig folder"]),
+    (["--joint", "--camera", "left"], ["--camera left", "--joint calibrates every camera"]),
+    (["single", "--joint"], ["--joint", "not a rig folder"]),
 ])
 def test_bad_rig_options_exit_2(tmp_path, capsys, args, words):
     rig = make_rig(tmp_path)
     if "single" in args:
-        args, rig = ["--camera", "front"], DATA / "front_pinhole"
+        args = ["--joint"] if "--joint" in args else ["--camera", "front"]
+        rig = DATA / "front_pinhole"
     status = main(["calibrate", str(rig), "--out", str(tmp_path / "out"), *args])
     err = capsys.readouterr().err
     assert status == 2, err
@@ -266,3 +269,85 @@ def test_resume_loads_the_recorded_camera(tmp_path, monkeypatch):
     with pytest.raises(Stop):
         rundir.resume_run(run)
     assert seen == {"models": {"mei"}, "images": {"left_images"}}
+
+
+def test_joint_run_from_the_command_line(tmp_path, capsys):
+    """``--joint``: one run folder OUT/joint over both cameras' frames, the second camera seen
+    through its mount (calib.yaml's camera-to-camera pose); rig.json holds every camera's
+    extrinsic, which keeps that pose; the run records the cameras for a resume."""
+    from paretocal.rig import RIG_JSON
+    from paretocal.rundir import run_arguments
+
+    rig = make_rig(tmp_path)
+    cams = dict(rig_cameras(rig))
+    T_ref = {n: s.frames[0].T_ref for n, s in cams.items()}
+    config = tmp_path / "fast.yaml"
+    config.write_text("decision: {restarts: 0}\nmotion: {deskew: \"off\"}\n"
+                      "features: {ring_method: elevation}\n")
+    out = tmp_path / "out"
+    status = main(["calibrate", str(rig), "--out", str(out), "--joint", "--init",
+                   str(DATA / "front_pinhole" / "calib.yaml"), "--frames", "0:2", "--pop", "12",
+                   "--gens", "2", "--no-polish", "--no-figures", "--config", str(config)])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert "cameras front, left at once: 4 frames" in captured.out
+    doc = json.loads((out / "joint" / "result.json").read_text())
+    assert doc["frames"] == [f"{c}/{n}" for c in ("front", "left")
+                             for n in ("0033643", "0033645")]
+    assert run_arguments(out / "joint")["joint"] == ["front", "left"]
+    summary = json.loads((out / RIG_JSON).read_text())
+    assert summary["joint"] is True and summary["pairs"] == []
+    T = {c["name"]: np.asarray(c["T_cam_lidar"]) for c in summary["cameras"]}
+    np.testing.assert_allclose(T["front"], doc["T_cam_lidar"], atol=1e-8)
+    np.testing.assert_allclose(T["left"] @ invert(T["front"]),
+                               T_ref["left"] @ invert(T_ref["front"]), atol=1e-7)
+    assert {c["verdict"] for c in summary["cameras"]} == {doc["reliability"]["verdict"]}
+    assert not (out / "front").exists() and not (out / "left").exists()
+
+
+def test_joint_frames_see_the_first_camera_through_their_mounts(tmp_path, monkeypatch):
+    """A joint run folder's resume loads both cameras' frames as one set: the second camera's
+    frames carry the mount ``T_left @ inv(T_front)`` and the first camera's reference (the
+    calibration itself is stubbed out here); a camera without a stated extrinsic is refused."""
+    import paretocal.rundir as rundir
+    from paretocal.inputs import joint_frames
+
+    rig = make_rig(tmp_path)
+    run = tmp_path / "out" / "joint"
+    run.mkdir(parents=True)
+    (run / rundir.RUN_ARGS).write_text(json.dumps({
+        "source": str(rig), "T_init": None, "settings": Settings(frames="0:2").to_dict(),
+        "figures": False, "joint": ["front", "left"]}))
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def stub(frames, *args, lidar=None, **kwargs):
+        seen["frames"], seen["lidar"] = frames, lidar
+        raise Stop
+    monkeypatch.setattr(rundir, "calibrate", stub)
+    with pytest.raises(Stop):
+        rundir.resume_run(run)
+    frames = seen["frames"]
+    assert [f.name for f in frames] == [f"{c}/{n}" for c in ("front", "left")
+                                        for n in ("0033643", "0033645")]
+    assert seen["lidar"].frames is frames and len(seen["lidar"].rings) == 4
+    T_ref = {n: s.frames[0].T_ref for n, s in rig_cameras(rig)}
+    assert frames[0].camera.mount is None
+    np.testing.assert_allclose(frames[2].camera.mount, T_ref["left"] @ invert(T_ref["front"]),
+                               atol=1e-12)
+    for f in frames:
+        np.testing.assert_allclose(f.T_ref, T_ref["front"])
+    # The same points project where the left camera alone puts them.
+    from paretocal.camera import project
+    single = load_rig_frames(rig_cameras(rig), "0:1")["left"][0]
+    np.testing.assert_allclose(project(single.points, frames[2].camera, T_ref["front"])[0],
+                               project(single.points, single.camera, T_ref["left"])[0],
+                               atol=1e-6)
+    import dataclasses
+
+    bare = load_rig_frames(rig_cameras(rig), "0:1")
+    bare["left"] = [dataclasses.replace(bare["left"][0], T_ref=None)]
+    with pytest.raises(InputError, match="camera left: .*stated T_cam_lidar"):
+        joint_frames(bare)

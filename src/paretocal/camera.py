@@ -42,7 +42,7 @@ from functools import cached_property
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
-from .geometry import transform_points
+from .geometry import check_rigid, transform_points
 
 MODELS = ("pinhole", "fisheye", "mei")
 
@@ -89,6 +89,11 @@ class Camera:
         Distortion coefficients in the model's order; stored as a tuple (``()`` for none).
     xi : float
         Mei mirror parameter, finite and ``>= 0`` (ignored by the other models).
+    mount : array_like, shape (4, 4), optional
+        For cameras of one rig calibrated at once (one extrinsic shared by all): this camera's
+        pose relative to the camera whose ``T_cam_lidar`` is estimated, ``X_this = mount @
+        X_that``; :func:`project` applies ``mount @ T_cam_lidar``. None (the default): this
+        camera is the one estimated.
 
     Notes
     -----
@@ -103,6 +108,7 @@ class Camera:
     model: str = "pinhole"
     D: tuple = None
     xi: float = 0.0
+    mount: np.ndarray | None = field(default=None, repr=False)
     r_limit: float = field(init=False, repr=False)
     _coeffs: np.ndarray = field(init=False, repr=False)
 
@@ -123,6 +129,10 @@ class Camera:
         xi = float(self.xi)
         if not np.isfinite(xi) or xi < 0:
             raise ValueError(f"xi must be a finite number >= 0, got {self.xi!r}")
+        if self.mount is not None:
+            mount = check_rigid(self.mount, "camera", key="mount")
+            mount.setflags(write=False)
+            object.__setattr__(self, "mount", mount)
         c = np.zeros(14)              # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4 tx ty (OpenCV order)
         if model == "pinhole":
             if D and len(D) not in _PINHOLE_D:
@@ -196,9 +206,18 @@ class Camera:
         return p
 
     def to_dict(self) -> dict:
-        """JSON-ready description: ``model``, ``K``, ``D``, ``xi``, ``width``, ``height``."""
-        return {"model": self.model, "K": self.K.tolist(), "D": list(self.D), "xi": self.xi,
-                "width": self.width, "height": self.height}
+        """JSON-ready description: ``model``, ``K``, ``D``, ``xi``, ``width``, ``height``
+        (and ``mount`` when set)."""
+        d = {"model": self.model, "K": self.K.tolist(), "D": list(self.D), "xi": self.xi,
+             "width": self.width, "height": self.height}
+        if self.mount is not None:
+            d["mount"] = self.mount.tolist()
+        return d
+
+    def mounted(self, T_cam_lidar: np.ndarray) -> np.ndarray:
+        """The extrinsic(s) this camera projects with: ``mount @ T_cam_lidar`` for any batch
+        (..., 4, 4) or (..., 3, 4) (``T_cam_lidar`` itself without a mount)."""
+        return T_cam_lidar if self.mount is None else compose_mount(self.mount, T_cam_lidar)
 
     # --- projection --------------------------------------------------------------------------
 
@@ -520,6 +539,7 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
         LiDAR points in metres (columns beyond the third are ignored).
     camera : Camera
     T_cam_lidar : ndarray, shape (4, 4), or a batch (..., 4, 4) or (..., 3, 4)
+        (the camera's ``mount`` applies on top).
     z_min : float
         Minimum depth (pinhole) or range (fisheye, Mei) in metres of a valid point.
 
@@ -532,10 +552,20 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
     visible : ndarray of bool, shape (..., N)
         Valid for the model and inside the image.
     """
-    Xc = transform_points(T_cam_lidar, points)
+    Xc = transform_points(camera.mounted(T_cam_lidar), points)
     uv, valid = camera.project_camera_points(Xc, z_min)
     visible = valid & in_image(uv, camera.width, camera.height)
     return uv, Xc[..., 2], visible
+
+
+def compose_mount(mount: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """``mount @ T`` for a (4, 4) ``mount`` and any batch ``T`` (..., 4, 4) or (..., 3, 4);
+    the result has ``T``'s shape."""
+    T = np.asarray(T, dtype=np.float64)
+    out = T.copy()
+    out[..., :3, :3] = mount[:3, :3] @ T[..., :3, :3]
+    out[..., :3, 3] = T[..., :3, 3] @ mount[:3, :3].T + mount[:3, 3]
+    return out
 
 
 def in_image(uv: np.ndarray, width: int, height: int, margin: float = 0.0) -> np.ndarray:

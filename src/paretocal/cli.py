@@ -257,6 +257,10 @@ def calibrate(
     strict: Annotated[bool, typer.Option(
         "--strict", help="Exit with status 3 when the result is judged unreliable (the outputs "
                          "are written either way).")] = False,
+    joint: Annotated[bool, typer.Option(
+        "--joint", help="A rig folder: calibrate every camera at once, one LiDAR correction "
+                        "for all, the cameras' relative poses kept as calib.yaml states them "
+                        "(--init: the first camera's start).")] = False,
     force: Force = False,
     verbose: Verbose = False,
     quiet: Quiet = False,
@@ -274,7 +278,8 @@ def calibrate(
                  "--init-error": init_error, "--bound-t": bound_t, "--bound-r": bound_r,
                  "--wide": wide, "--chamfer": chamfer, "--w-edge": w_edge, "--cost": cost,
                  "--evaluator": evaluator, "--polish/--no-polish": polish,
-                 "--no-figures": None if figures else False, "--force": force or None}
+                 "--no-figures": None if figures else False, "--force": force or None,
+                 "--joint": joint or None}
         clash = [name for name, value in given.items() if value is not None]
         if clash:
             raise SettingsError(f"--resume {resume} continues the run with the data, start and "
@@ -308,7 +313,9 @@ def calibrate(
     adopt = err_deg is None and not states_init_error(config)
     if is_rig(source):
         return _calibrate_rig(source, out, init, camera, frames, settings, adopt,
-                              figures, quiet, checkpoint_every, strict, force)
+                              figures, quiet, checkpoint_every, strict, force, joint)
+    if joint:
+        raise SettingsError(f"--joint: {source} is not a rig folder (calib.yaml with cameras:)")
     if camera is not None:
         camera = _camera_index(camera)
     if camera is not None or frames is not None:
@@ -347,24 +354,28 @@ def _camera_index(text: str) -> int:
                             "to a rig folder (calib.yaml with cameras:)") from None
 
 
-def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,
+def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, settings,  # noqa: PLR0913
                    dataset_options: bool, figures: bool, quiet: bool, checkpoint_every: int,
-                   strict: bool, force: bool) -> None:
+                   strict: bool, force: bool, joint: bool = False) -> None:
     """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
-    and ``out/rig.json`` (:mod:`paretocal.rig`)."""
+    and ``out/rig.json``, or with ``joint`` all cameras at once into ``out/joint/``
+    (:mod:`paretocal.rig`)."""
     import dataclasses
 
     from .errors import Interrupted
     from .io import rig_cameras
     from .io.atomic import check_output_dir, check_own_folder
-    from .rig import RIG_JSON, calibrate_rig, pair_line
+    from .rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
 
     cams = rig_cameras(source)
     names = [n for n, _ in cams]
+    if joint and camera is not None:
+        raise SettingsError(f"--camera {camera}: --joint calibrates every camera of the rig at "
+                            "once")
     if camera is not None and camera not in names:
         raise SettingsError(f"--camera {camera}: {source / 'calib.yaml'} lists the cameras "
                             f"{', '.join(names)}")
-    if init is not None and camera is None:
+    if init is not None and camera is None and not joint:
         raise SettingsError(f"--init {init}: a rig's initial extrinsics are its calib.yaml's "
                             "cameras.NAME.T_cam_lidar; --init applies to one camera, with "
                             "--camera NAME")
@@ -373,18 +384,22 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     settings.validate()
     check_output_dir(out)
     if not force:       # a rig's run folder holds rig.json and a run folder per camera
-        check_own_folder(out, (RIG_JSON, *names), "rig run")
-    for name in [camera] if camera is not None else names:
+        check_own_folder(out, (RIG_JSON, *names, JOINT_RUN), "rig run")
+    for name in [JOINT_RUN] if joint else [camera] if camera is not None else names:
         _check_run_out(out / name, force)
-    T_inits = {camera: read_init(init, source, None)} if init is not None else None
+    first = names[0] if joint else camera
+    T_inits = {first: read_init(init, source, None)} if init is not None else None
     unreliable = []
 
     def said(name, result):
+        if joint and name != names[0]:
+            return
         ref = result.reference_error
         rel = result.reliability
-        typer.echo(f"paretocal: camera {name}: {len(result.frames)} frames, chosen n = "
+        what = f"cameras {', '.join(names)} at once" if joint else f"camera {name}"
+        typer.echo(f"paretocal: {what}: {len(result.frames)} frames, chosen n = "
                    f"{result.n_points}; error vs reference: {_fmt_err(ref)}; verdict "
-                   f"{rel['verdict']}; wrote {out / name}")
+                   f"{rel['verdict']}; wrote {out / (JOINT_RUN if joint else name)}")
         if rel["verdict"] != "ok":
             unreliable.append(name)
 
@@ -393,13 +408,13 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
                                     checkpoint_every, progress, on_camera=said,
-                                    dataset_options=dataset_options)
+                                    dataset_options=dataset_options, joint=joint)
     except Interrupted as exc:
         _report(interrupted_line(exc, getattr(exc, "run_dir", out)))
         raise typer.Exit(130) from None
     for pair in summary["pairs"]:
         typer.echo(f"paretocal: {pair_line(pair)}")
-    if summary["pairs"]:
+    if summary["pairs"] or joint:
         typer.echo(f"paretocal: wrote {out / RIG_JSON}")
     if strict and unreliable:
         raise typer.Exit(STRICT_EXIT)
@@ -411,12 +426,17 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
     where the partial front and the checkpoint are, and exit 130."""
     from .errors import Interrupted
-    from .rundir import calibrate_run, resume_run
+    from .rundir import calibrate_run, resume_run, run_arguments
 
     try:
         with _Progress(quiet) as progress:
             if resume:
+                recorded = run_arguments(out)
                 result = resume_run(out, checkpoint_every, progress=progress)
+                if recorded["joint"]:
+                    from .rig import write_joint_summary
+
+                    write_joint_summary(result, out, recorded["joint"], recorded["source"])
             else:
                 result = calibrate_run(source, out, T_init, settings, frames=loaded,
                                        figures=figures, checkpoint_every=checkpoint_every,

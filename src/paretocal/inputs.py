@@ -13,6 +13,7 @@ from .config import Settings
 from .errors import InputError
 from .features.prepare import frame_rings, view_mask
 from .features.rings import MIN_PURITY, MIN_RINGS, Rings
+from .geometry import invert
 from .io.frame import Frame
 
 log = logging.getLogger(__name__)
@@ -289,3 +290,72 @@ def prepare_lidar(frames: list[Frame], settings: Settings, views=None) -> LidarS
     rings = sweep_rings(frames, settings, first_rings, views)
     frames, motion_info = compensate_motion(frames, settings)
     return LidarSteps(frames, lidar_info, rings, motion_info, lidar_settings_key(settings))
+
+
+def joint_frames(frames: dict[str, list[Frame]]) -> list[Frame]:
+    """The frames of several cameras of one rig as one calibration of the first camera's
+    extrinsic (a *joint* calibration).
+
+    Every other camera's frames see the first camera's ``T_cam_lidar`` through a mount
+    (:attr:`paretocal.camera.Camera.mount`), ``T_i @ inv(T_0)`` from the extrinsics the rig
+    states (each frame's ``T_ref``), so that one correction ``D`` in the LiDAR frame moves
+    every camera alike (``T_i @ D = mount_i @ T_0 @ D``): the cameras keep their relative
+    poses, and only the LiDAR moves relative to them.
+
+    Parameters
+    ----------
+    frames : dict of str to list of Frame
+        Each camera's frames, cameras in the order they are listed; the first camera is the
+        one whose extrinsic is estimated. Every camera's frames must state ``T_ref``.
+
+    Returns
+    -------
+    list of Frame
+        The frames, named ``<camera>/<frame>``, each with the first camera's ``T_ref``.
+    """
+    names = list(frames)
+    _check_stated(frames)
+    T0 = np.asarray(frames[names[0]][0].T_ref, dtype=np.float64)
+    out = []
+    for name in names:
+        mount = None if name == names[0] else frames[name][0].T_ref @ invert(T0)
+        for f in frames[name]:
+            cam = f.camera if mount is None else dataclasses.replace(f.camera, mount=mount)
+            out.append(dataclasses.replace(f, name=f"{name}/{f.name}", camera=cam, T_ref=T0))
+    return out
+
+
+def _check_stated(frames: dict[str, list[Frame]]) -> None:
+    missing = [n for n in frames if not frames[n] or frames[n][0].T_ref is None]
+    if missing:
+        raise InputError(f"camera {missing[0]}: no frames or no stated T_cam_lidar; a joint "
+                         "calibration keeps the cameras' relative poses as the rig states them")
+
+
+def load_joint(source, settings: Settings, cameras: list[str] | None = None
+               ) -> tuple[list[Frame], LidarSteps]:
+    """The selected frames of the cameras ``cameras`` (all by default) of the rig folder
+    ``source``, their LiDAR steps done once per set of clouds, as one joint calibration
+    (:func:`joint_frames`): ``(frames, steps)`` for :func:`paretocal.calibrate`."""
+    from .io import load_rig_frames, rig_cameras
+
+    found = rig_cameras(source)
+    if cameras:
+        found = [(n, s) for n, s in found if n in cameras]
+    loaded = load_rig_frames(found, settings.frames)
+    _check_stated(loaded)
+    clouds = {name: tuple((f.name, str(f.points_path)) for f in fr)
+              for name, fr in loaded.items()}
+    done: dict = {}
+    for key in dict.fromkeys(clouds.values()):
+        # Once per set of clouds, the rings judged where any camera over them looks.
+        views = [(loaded[n][0].camera, loaded[n][0].T_ref) for n in loaded
+                 if clouds[n] == key and loaded[n]]
+        done[key] = prepare_lidar(loaded[next(n for n in loaded if clouds[n] == key)],
+                                  settings, views)
+    frames = joint_frames({name: done[clouds[name]].for_camera(fr)
+                           for name, fr in loaded.items()})
+    first = done[clouds[next(iter(loaded))]]
+    rings = [r for name in loaded for r in done[clouds[name]].rings]
+    return frames, LidarSteps(frames, first.lidar_info, rings, first.motion_info,
+                              lidar_settings_key(settings))

@@ -104,6 +104,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             frames, motion_info = compensate_motion(frames, settings)
     wide = None
     if wanted(settings):
+        if any(f.camera.mount is not None for f in frames):
+            raise SettingsError(
+                "a joint calibration of several cameras does not take a wide start: calibrate "
+                "one camera with the wide initial error first, then the rig from its result")
         with _timed(timings, "wide", progress):
             wide = wide_start(frames, T_init, settings, rings)
         if wide.applied:

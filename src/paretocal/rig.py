@@ -51,11 +51,12 @@ log = logging.getLogger(__name__)
 RIG_JSON = "rig.json"
 
 
-def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None = None,
-                  T_inits: dict[str, np.ndarray] | None = None,
-                  cameras: list[str] | None = None, figures: bool = True,
-                  checkpoint_every: int = 5, progress=None, on_camera=None,
-                  dataset_options: bool = True) -> dict:
+def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
+        source: str | Path, out: str | Path, settings: Settings | None = None,
+        T_inits: dict[str, np.ndarray] | None = None,
+        cameras: list[str] | None = None, figures: bool = True,
+        checkpoint_every: int = 5, progress=None, on_camera=None, *,
+        dataset_options: bool = True, joint: bool = False) -> dict:
     """Calibrate the cameras of the rig folder ``source`` into ``out/<name>/`` and write
     ``out/rig.json`` (when more than one camera was calibrated).
 
@@ -78,6 +79,11 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
     dataset_options : bool
         False: the settings are final (they state ``init_error`` even where it is the
         default).
+    joint : bool
+        Calibrate the cameras at once into ``out/joint/``: one correction of the LiDAR shared
+        by every camera, the cameras' relative poses kept as calib.yaml states them
+        (:func:`paretocal.inputs.joint_frames`); ``T_inits`` may then hold the first
+        camera's only. rig.json is written also for one camera.
 
     Returns
     -------
@@ -97,6 +103,9 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
     if cameras:
         found = [(n, s) for n, s in found if n in cameras]
     t0 = time.perf_counter()
+    if joint:
+        return _calibrate_joint(source, out, settings, T_inits, [n for n, _ in found],
+                                figures, checkpoint_every, progress, on_camera, t0)
     frames = load_rig_frames(found, settings.frames)
     steps: dict = {}
     results: dict[str, CalibrationResult] = {}
@@ -126,6 +135,67 @@ def calibrate_rig(source: str | Path, out: str | Path, settings: Settings | None
     if len(results) > 1:
         atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
     return summary
+
+
+JOINT_RUN = "joint"
+
+
+def _calibrate_joint(source: Path, out: Path, settings: Settings, T_inits: dict,
+                     names: list[str], figures: bool, checkpoint_every: int, progress,
+                     on_camera, t0: float) -> dict:
+    """:func:`calibrate_rig` with ``joint``: one run over every camera's frames."""
+    other = sorted(set(T_inits) - {names[0]})
+    if other:
+        raise SettingsError(f"camera {other[0]}: a joint calibration starts from the first "
+                            f"camera's extrinsic ({names[0]}); the others keep their poses "
+                            "relative to it as calib.yaml states them")
+    try:
+        result = calibrate_run(source, out / JOINT_RUN, T_inits.get(names[0]), settings,
+                               figures=figures, checkpoint_every=checkpoint_every,
+                               progress=progress, dataset_options=False, joint=names)
+    except Interrupted as exc:
+        exc.run_dir = out / JOINT_RUN
+        raise
+    if on_camera is not None:
+        for name in names:
+            on_camera(name, result)
+    return write_joint_summary(result, out / JOINT_RUN, names, source,
+                               wall_s=round(time.perf_counter() - t0, 2))
+
+
+def write_joint_summary(result: CalibrationResult, run_dir: str | Path, names: list[str],
+                        source: str | Path, **extra) -> dict:
+    """Write rig.json beside the joint run folder ``run_dir`` (:func:`joint_summary`, with
+    the rig folder ``source`` and ``extra``); return its content."""
+    run_dir = Path(run_dir)
+    summary = joint_summary(result, names)
+    summary.update(source=str(Path(source).resolve()), **extra)
+    atomic_write_text(run_dir.parent / RIG_JSON, json.dumps(summary, indent=1) + "\n")
+    return summary
+
+
+def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
+    """rig.json's content for a joint run: every camera's extrinsic (its mount on the first
+    camera's result), the shared verdict and intervals; no pairs (their relative poses are
+    calib.yaml's)."""
+    mounts = {}
+    for f in result.sweeps or []:
+        name = f.name.split("/", 1)[0]
+        mounts.setdefault(name, np.eye(4) if f.camera.mount is None else f.camera.mount)
+    rel = result.reliability or {}
+    cams = []
+    for name in names:
+        M = mounts[name]
+        T, T0 = M @ result.T_cam_lidar, M @ result.T_init
+        ref = None if result.T_ref is None else _err(T, M @ result.T_ref)
+        cams.append({"name": name, "run": JOINT_RUN, "T_cam_lidar": _matrix(T),
+                     "T_init": _matrix(T0), "T_camera_first": _matrix(M),
+                     "verdict": rel.get("verdict"), "reasons": rel.get("reasons", []),
+                     "reference_error": ref,
+                     "intervals_95": (rel.get("intervals") or {}).get("half_width")})
+    return {"joint": True, "cameras": cams, "pairs": [],
+            "frames_per_camera": {n: sum(f.split("/", 1)[0] == n for f in result.frames)
+                                  for n in names}}
 
 
 def _views(frames: dict, T_inits: dict, key: tuple) -> list:

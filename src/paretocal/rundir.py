@@ -45,6 +45,7 @@ import numpy as np
 from .config import Settings, dataset_settings, settings_from_mapping
 from .errors import InputError, Interrupted, ParetocalError
 from .geometry import check_rigid
+from .inputs import load_joint
 from .io import load_frames, rig_source, source_options
 from .io.atomic import atomic_write_text, temporary_pattern
 from .io.frame import Frame
@@ -258,7 +259,7 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
         settings: Settings | None = None, frames: list[Frame] | None = None,
         figures: bool = True, checkpoint_every: int = 5, progress=None,
         rig_camera: str | None = None, lidar=None, *,
-        dataset_options: bool = True) -> CalibrationResult:
+        dataset_options: bool = True, joint: list[str] | None = None) -> CalibrationResult:
     """Calibrate ``source`` into the run folder ``out``, resumable.
 
     Parameters
@@ -288,6 +289,10 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
     dataset_options : bool
         False: the settings are final (they state ``init_error`` even where it is the
         default, or were recorded after adoption: a resumed run).
+    joint : list of str, optional
+        ``source`` is a rig folder and these of its cameras are calibrated at once, one
+        extrinsic for all (:func:`paretocal.inputs.load_joint`; recorded for the resume);
+        ``T_init`` is then the first camera's.
 
     Raises
     ------
@@ -301,11 +306,14 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
     out = Path(out)
     if frames is None:
         try:
-            src = source if rig_camera is None else rig_source(source, rig_camera)
-            frames = load_frames(src, settings.frames, settings.camera)
+            if joint:
+                frames, lidar = load_joint(source, settings, joint)
+            else:
+                src = source if rig_camera is None else rig_source(source, rig_camera)
+                frames = load_frames(src, settings.frames, settings.camera)
         except KeyboardInterrupt:
             raise Interrupted("loading the frames") from None
-    args = run_record(source, T_init, settings, figures, rig_camera)
+    args = run_record(source, T_init, settings, figures, rig_camera, joint)
     with locked(out):
         check_run_folder(out)              # refused before the search, not after it
         ckpt = None
@@ -339,20 +347,23 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
 
 
 def run_record(source: str | Path, T_init: np.ndarray | None, settings: Settings,
-               figures: bool, rig_camera: str | None = None) -> dict:
+               figures: bool, rig_camera: str | None = None,
+               joint: list[str] | None = None) -> dict:
     """A run's arguments as ``run_args.json`` holds them (what :func:`run_arguments` reads
     back): the source's absolute path, ``T_init`` (4, 4) or None, the settings by section,
-    whether figures are drawn and the rig camera, if any."""
+    whether figures are drawn, the rig camera, if any, and the cameras of a joint run."""
     return {"source": str(Path(source).resolve()),
             "T_init": None if T_init is None else np.asarray(T_init).tolist(),
             "settings": settings.to_dict(), "figures": bool(figures),
-            **({} if rig_camera is None else {"rig_camera": rig_camera})}
+            **({} if rig_camera is None else {"rig_camera": rig_camera}),
+            **({"joint": list(joint)} if joint else {})}
 
 
 def run_arguments(run_dir: str | Path) -> dict:
     """What the run in ``run_dir`` recorded (``checkpoint_args.json`` of an unfinished run,
     else ``run_args.json``): ``source`` (Path), ``T_init`` (ndarray or None), ``settings``
-    (Settings), ``figures`` (bool) and ``rig_camera`` (the camera of a rig folder, or None).
+    (Settings), ``figures`` (bool), ``rig_camera`` (the camera of a rig folder, or None) and
+    ``joint`` (the cameras of a joint run, or None).
     One-line error naming the file when it is not a run folder or a field is malformed."""
     run_dir = Path(run_dir)
     path = next((run_dir / n for n in (CHECKPOINT_ARGS, RUN_ARGS)
@@ -391,12 +402,16 @@ def run_arguments(run_dir: str | Path) -> dict:
     camera = args.get("rig_camera")
     if camera is not None and not isinstance(camera, str):
         raise malformed("rig_camera", "a camera's name (text)")
+    joint = args.get("joint")
+    if joint is not None and not (isinstance(joint, list) and joint
+                                  and all(isinstance(n, str) for n in joint)):
+        raise malformed("joint", "a list of camera names")
     try:
         settings = settings_from_mapping(args["settings"], str(path))
     except (ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
     return {"source": Path(source), "T_init": T_init, "settings": settings,
-            "figures": args["figures"], "rig_camera": camera}
+            "figures": args["figures"], "rig_camera": camera, "joint": joint}
 
 
 def _rig_camera_of(run_args: Path) -> str | None:
@@ -420,4 +435,4 @@ def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
     return calibrate_run(args["source"], run_dir, args["T_init"], args["settings"],
                          figures=args["figures"], checkpoint_every=max(checkpoint_every, 1),
                          progress=progress, rig_camera=args["rig_camera"],
-                         dataset_options=False)
+                         dataset_options=False, joint=args["joint"])

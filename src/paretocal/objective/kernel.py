@@ -228,8 +228,8 @@ if HAVE_NUMBA:
 
     @njit(parallel=True, cache=True, error_model="numpy")
     def _sums_numba(R, cam, n, x, y, z, weight, group_start, group_count, point_start, dtq,
-                    dt_start, width, height, has_mask, outside_q, z_min, S1, S2, NIN, KS, FS,
-                    OS):  # pragma: no cover - compiled
+                    dt_start, width, height, has_mask, outside_q, z_min, mount, mounted, S1, S2,
+                    NIN, KS, FS, OS):  # pragma: no cover - compiled
         # Frame-outer loop: all candidates read one frame's DT while it is hot in cache. The DT
         # is stored as uint16 (0.00015 px steps at a 10 px truncation): half the bytes of
         # float32, so a 1242 x 375 frame fits a 1 MB L2 cache; bilinear lookups were 55 % of
@@ -255,6 +255,24 @@ if HAVE_NUMBA:
                 r00, r01, r02, r03 = R[c, 0, 0], R[c, 0, 1], R[c, 0, 2], R[c, 0, 3]
                 r10, r11, r12, r13 = R[c, 1, 0], R[c, 1, 1], R[c, 1, 2], R[c, 1, 3]
                 r20, r21, r22, r23 = R[c, 2, 0], R[c, 2, 1], R[c, 2, 2], R[c, 2, 3]
+                if mounted[f]:
+                    # A camera of a rig calibrated at once: this frame sees mount @ T.
+                    M = mount[f]
+                    q00 = M[0, 0] * r00 + M[0, 1] * r10 + M[0, 2] * r20
+                    q01 = M[0, 0] * r01 + M[0, 1] * r11 + M[0, 2] * r21
+                    q02 = M[0, 0] * r02 + M[0, 1] * r12 + M[0, 2] * r22
+                    q03 = M[0, 0] * r03 + M[0, 1] * r13 + M[0, 2] * r23 + M[0, 3]
+                    q10 = M[1, 0] * r00 + M[1, 1] * r10 + M[1, 2] * r20
+                    q11 = M[1, 0] * r01 + M[1, 1] * r11 + M[1, 2] * r21
+                    q12 = M[1, 0] * r02 + M[1, 1] * r12 + M[1, 2] * r22
+                    q13 = M[1, 0] * r03 + M[1, 1] * r13 + M[1, 2] * r23 + M[1, 3]
+                    q20 = M[2, 0] * r00 + M[2, 1] * r10 + M[2, 2] * r20
+                    q21 = M[2, 0] * r01 + M[2, 1] * r11 + M[2, 2] * r21
+                    q22 = M[2, 0] * r02 + M[2, 1] * r12 + M[2, 2] * r22
+                    q23 = M[2, 0] * r03 + M[2, 1] * r13 + M[2, 2] * r23 + M[2, 3]
+                    r00, r01, r02, r03 = q00, q01, q02, q03
+                    r10, r11, r12, r13 = q10, q11, q12, q13
+                    r20, r21, r22, r23 = q20, q21, q22, q23
                 m = min(n[c], mf)
                 inside = 0
                 for g in range(G):
@@ -328,8 +346,8 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
         _sums_numba(R, scene.cam_params, n, scene.gx, scene.gy, scene.gz, scene.gweight,
                     scene.group_start, scene.group_count, scene.point_start, scene.dtq,
                     scene.dt_start, scene.width, scene.height, scene.has_mask,
-                    scene.outside.astype(np.float64) / q, np.float64(scene.z_min), S1, S2, NIN,
-                    *block_scratch(T_))
+                    scene.outside.astype(np.float64) / q, np.float64(scene.z_min), scene.mount,
+                    scene.mounted, S1, S2, NIN, *block_scratch(T_))
     finally:
         numba.set_num_threads(threads)
     if perm is not None:
@@ -396,13 +414,14 @@ def sums_numpy(scene: Scene, T: np.ndarray, n: np.ndarray, chunk_points: int = 4
             continue
         Pt = _frame_points(scene, f).T.copy()                    # (3, m)
         cam = scene.cameras[f]
+        Rf = R if cam.mount is None else cam.mounted(R)
         grp = scene.group[a:b]
         wt = scene.weight[a:b].astype(np.float64)
         dtf = scene.frame_dt(f)                                   # NaN on masked pixels
         w, h = int(scene.width[f]), int(scene.height[f])
         step = max(1, chunk_points // m_all)
         for c0 in range(0, C, step):
-            Rc = R[c0:c0 + step]                                  # (c, 3, 4)
+            Rc = Rf[c0:c0 + step]                                 # (c, 3, 4)
             X, Y, Z = (Rc[:, k, :3] @ Pt + Rc[:, k, 3:] for k in range(3))   # (c, m) each
             u, v, valid = cam.project_xyz(X, Y, Z, scene.z_min)
             used = np.arange(m_all)[None, :] < n[c0:c0 + step, None]

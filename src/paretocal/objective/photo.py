@@ -168,6 +168,9 @@ def build_photo_scene(clouds, poses: np.ndarray, images, cameras: list[Camera], 
         its mounts, the farthest move too little between frames to tell poses apart.
     rng : Generator or seed
     """
+    if any(c.mount is not None for c in cameras):
+        raise ValueError("build_photo_scene: cameras with a mount (a rig calibrated at once) "
+                         "are not supported")
     rng = np.random.default_rng(rng)
     parts = []
     for pts, P in zip(clouds, poses):

@@ -52,6 +52,11 @@ class Scene:
         Each frame's camera (the numpy evaluators project through it).
     cam_params : ndarray, shape (F, N_PARAMS), float64
         The same cameras as :meth:`Camera.kernel_params` rows, for the numba kernel.
+    mount : ndarray, shape (F, 3, 4), float64
+        The top rows of each frame's :attr:`Camera.mount` (identity without one): frame f is
+        evaluated at ``mount[f] @ T`` for a candidate ``T``.
+    mounted : ndarray, shape (F,), bool
+        Whether frame f's camera has a mount (the kernel composes only where it does).
     group_prefix : ndarray, shape (F, max_points + 1, G, 2), float64
         ``group_prefix[f, k, g]`` = sum of the weights and of the squared weights of group g
         among the first k points of frame f (both equal the count when weights are 1).
@@ -96,6 +101,8 @@ class Scene:
     gweight: np.ndarray
     group_start: np.ndarray
     group_count: np.ndarray
+    mount: np.ndarray
+    mounted: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -201,7 +208,11 @@ def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = 
         cam_params=np.ascontiguousarray(np.stack([c.kernel_params() for c in cameras]))
         if cameras else np.zeros((0, N_PARAMS)),
         gx=x[order], gy=y[order], gz=z[order], gweight=weight[order], group_start=group_start,
-        group_count=group_count)
+        group_count=group_count,
+        mount=np.ascontiguousarray(np.stack([(np.eye(4) if c.mount is None else c.mount)[:3]
+                                             for c in cameras]) if cameras
+                                   else np.zeros((0, 3, 4))),
+        mounted=np.array([c.mount is not None for c in cameras], dtype=bool))
 
 
 def _grouped(group: np.ndarray, point_start: np.ndarray):
