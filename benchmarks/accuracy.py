@@ -19,7 +19,11 @@ Datasets (``--source`` takes any folder ``paretocal`` reads):
 * ``--dataset raw`` (default): the 20-frame KITTI raw drive of the sample data;
   ``--dataset object``: the single KITTI object frame;
 * ``--source PATH``: a KITTI raw drive or date folder, a KITTI object ``training`` folder, or a
-  generic folder (``calib.yaml`` with ``T_cam_lidar``, ``images/``, ``points/``). The blind copy
+  generic folder (``calib.yaml`` with ``T_cam_lidar``, ``images/``, ``points/``), or a rig
+  folder (``calib.yaml`` with ``cameras:``), whose cameras are calibrated at once
+  (``calibrate --joint``): the start moves the LiDAR, so every camera's ``T_cam_lidar`` in the
+  blind copy is its reference with the same correction undone, and the result compared is
+  the first camera's. The blind copy
   of a generic folder links every entry of the folder (symbolic links resolved, including the
   one-line files that stand for a link where links were not kept) and rewrites ``calib.yaml``
   with ``T_cam_lidar`` set to the start, every other key unchanged;
@@ -376,6 +380,43 @@ def blind_copy_folder(root: Path, T_cam_lidar: np.ndarray, dst: Path) -> Path:
     return out
 
 
+def rig_references(root: Path) -> list[np.ndarray]:
+    """Every camera's ``T_cam_lidar`` in a rig folder's ``calib.yaml``, in its order."""
+    from paretocal.io import rig_cameras
+
+    return [src.frames[0].T_ref for _, src in rig_cameras(root)]
+
+
+def blind_copy_rig(root: Path, G: np.ndarray, dst: Path) -> Path:
+    """A rig folder whose cameras' ``T_cam_lidar`` are their references times ``G`` (the LiDAR
+    moved by one correction; the cameras' relative poses kept), entries linked as
+    :func:`blind_copy_folder` does, and read back."""
+    from paretocal.io import rig_cameras
+
+    root = Path(root)
+    data = dict(read_mapping(root / "calib.yaml"))
+    refs = rig_references(root)
+    out = Path(dst) / root.resolve().name
+    out.mkdir(parents=True)
+    for entry in sorted(root.iterdir()):
+        if entry.name != "calib.yaml":
+            (out / entry.name).symlink_to(resolve_entry(entry),
+                                          target_is_directory=resolve_entry(entry).is_dir())
+    cams = data["cameras"]
+    entries = list(cams.values()) if isinstance(cams, dict) else cams
+    moved = [dict(e, T_cam_lidar=_rows(T @ G)) for e, T in zip(entries, refs)]
+    data["cameras"] = (dict(zip(cams, moved)) if isinstance(cams, dict) else moved)
+    header = (f"# Blind copy of {root.resolve()} for an accuracy trial: every T_cam_lidar is the\n"
+              "# camera's reference with one LiDAR correction undone; the other keys are the "
+              "original's.\n")
+    (out / "calib.yaml").write_text(header + yaml.safe_dump(data, sort_keys=False,
+                                                            default_flow_style=None))
+    for (_, src), T in zip(rig_cameras(out), refs):
+        assert np.allclose(src.frames[0].T_ref, T @ G, atol=1e-9), \
+            "blind copy does not hold the extrinsics"
+    return out
+
+
 def blind_copy(date: Path, T_cam_lidar: np.ndarray, dst: Path, camera: int = 2) -> Path:
     """A KITTI raw date folder whose ``calib_velo_to_cam.txt`` holds ``T_cam_lidar``.
 
@@ -428,7 +469,7 @@ class Dataset:
     """One dataset to run the trials on."""
 
     label: str                     #: shown in the summary, and the folder name under the work dir
-    layout: str                    #: "kitti_raw", "kitti_object" or "folder"
+    layout: str                    #: "kitti_raw", "kitti_object", "folder" or "rig"
     path: Path                     #: what the blind copies are made from
     T_ref: np.ndarray
     variant: str | None = None
@@ -442,7 +483,9 @@ def layout_of(path: Path) -> str:
     """The layout name of ``path`` (a generic folder is recognised by its calib.yaml alone, so
     a folder whose ``points`` still has to be resolved is recognised too)."""
     if (Path(path) / "calib.yaml").is_file():
-        return "folder"
+        from paretocal.io import is_rig
+
+        return "rig" if is_rig(path) else "folder"
     return detect_source(path).layout
 
 
@@ -452,6 +495,8 @@ def make_copy(ds: Dataset, T: np.ndarray, dst: Path) -> Path:
         return blind_copy(ds.path, T, dst)
     if ds.layout == "kitti_object":
         return blind_copy_object(ds.path, T, dst)
+    if ds.layout == "rig":
+        return blind_copy_rig(ds.path, invert(ds.T_ref) @ T, dst)
     return blind_copy_folder(ds.path, T, dst)
 
 
@@ -508,7 +553,8 @@ def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
     init = trial / "init.yaml"
     write_extrinsic(init, T_init)
     run = trial / "run"
-    cmd = [sys.executable, "-m", "paretocal.cli", "calibrate", str(data), "--init", str(init),
+    start = ["--joint"] if ds.layout == "rig" else ["--init", str(init)]
+    cmd = [sys.executable, "-m", "paretocal.cli", "calibrate", str(data), *start,
            "--out", str(run), "--quiet", "--no-figures"] + calibrate_options(args, ds)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode in (130, -2):
@@ -516,7 +562,8 @@ def _run_cli(args, ds: Dataset, T_init: np.ndarray, trial: Path) -> dict:
     if proc.returncode != 0:
         lines = proc.stderr.strip().splitlines()
         return {"exit": proc.returncode, "error": lines[-1] if lines else ""}
-    doc = json.loads((run / "result.json").read_text())
+    doc = json.loads((run / ("joint/result.json" if ds.layout == "rig" else "result.json"))
+                     .read_text())
     rel = doc.get("reliability") or {}
     return {"T": np.array(doc["T_cam_lidar"]), "n": int(doc["n_points"]),
             "verdict": rel.get("verdict"), "reasons": list(rel.get("reasons") or []),
@@ -759,7 +806,12 @@ def datasets(args, work: Path) -> list[Dataset]:
                                all_frames=True))
         return out
     layout = layout_of(source)
-    if layout == "folder":
+    if layout == "rig":
+        if args.api:
+            raise SystemExit("accuracy.py: a rig folder runs through the CLI (no --api)")
+        T_ref = rig_references(source)[0]
+        label = f"rig {source} (--joint)"
+    elif layout == "folder":
         T_ref = folder_reference(source)
         label = f"folder {source}"
     else:

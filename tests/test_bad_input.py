@@ -721,6 +721,16 @@ def _fake_result(**over):
     ({"evidence": {"contrast": {"frames_clear": 1.0, "z": 2.4}}},
      "images and clouds barely agree: the result fits the image edges only 2.4 spreads better"),
     ({"evidence": {"contrast": {"frames_clear": 0.95, "z": 5.0}}}, None),
+    # A joint calibration: a camera whose own frames prefer another pose is named.
+    ({"evidence": {"cameras": {"disagreeing": ["left"], "cameras": [
+        {"name": "front", "checked": True, "agrees": True},
+        {"name": "left", "checked": True, "agrees": False, "separation_deg": 0.51,
+         "separation_cm": 8.2, "own_optimum_px": 5.2, "tolerance_px": 2.0}]}}},
+     "the cameras disagree: camera left's frames alone prefer a pose 0.51 deg / 8.2 cm away, "
+     "moving its points 5.2 px (its edges are trusted to 2 px)"),
+    ({"evidence": {"cameras": {"disagreeing": [], "cameras": [
+        {"name": "front", "checked": True, "agrees": True},
+        {"name": "left", "checked": False}]}}}, None),
     # The wide start's ambiguity is the verdict's; its disagreement alone is not.
     ({"wide": {"applied": True, "ambiguity": "the wide search found two poses 2.9 deg / 203 cm "
                "apart that the frames do not tell apart"}},

@@ -295,6 +295,8 @@ def test_joint_run_from_the_command_line(tmp_path, capsys):
     assert doc["frames"] == [f"{c}/{n}" for c in ("front", "left")
                              for n in ("0033643", "0033645")]
     assert run_arguments(out / "joint")["joint"] == ["front", "left"]
+    with pytest.raises(ParetocalError, match="resume the cameras at once with --resume .*joint"):
+        run_arguments(out)
     summary = json.loads((out / RIG_JSON).read_text())
     assert summary["joint"] is True and summary["pairs"] == []
     T = {c["name"]: np.asarray(c["T_cam_lidar"]) for c in summary["cameras"]}

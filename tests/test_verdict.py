@@ -248,3 +248,34 @@ def test_the_verdict_line_of_an_untrusted_result_says_how_the_start_compares():
     assert "keep the initial extrinsic" in line
     ok = verdict_text({"verdict": "ok", "reasons": [], "frames": 8, "start": None})
     assert "initial extrinsic" not in ok
+
+
+def test_cameras_that_share_a_pose_agree_and_a_wrong_mount_disagrees(raw_frames):
+    """A joint calibration's camera check on the KITTI drive split into two "cameras" of 5
+    frames: with the rig's true camera-to-camera pose (the identity) each camera's own optimum
+    stays within its edges' tolerance of the joint one; a second camera stated 1.5 deg off in
+    yaw pulls the joint optimum away from both, and the check names the cameras."""
+    from paretocal.geometry import correction_matrix
+    from paretocal.inputs import joint_frames
+    from paretocal.quality import local_optimum
+    from paretocal.verdict import camera_evidence
+
+    def check(mount_b):
+        a, b = raw_frames[:5], raw_frames[5:10]
+        T = a[0].T_ref
+        b = [dataclasses.replace(f, T_ref=mount_b @ T) for f in b]
+        frames = joint_frames({"a": a, "b": b})
+        st = Stage(frames, T, T, SETTINGS)
+        groups = st.camera_groups()
+        assert list(groups) == ["a", "b"] and list(groups["b"][0]) == list(range(5, 10))
+        x = local_optimum(st.objective, np.r_[np.zeros(6), st.n_max])
+        return camera_evidence(st.objective, x, groups)
+
+    same = check(np.eye(4))
+    assert same["disagreeing"] == [], same
+    for c in same["cameras"]:
+        assert c["checked"] and c["own_optimum_px"] < c["tolerance_px"]
+    wrong = check(correction_matrix(np.r_[0, 0, 0, 1.5, 0, 0]))
+    assert wrong["disagreeing"] == ["a", "b"], wrong
+    for c in wrong["cameras"]:
+        assert c["separation_deg"] > 0.4 and c["own_optimum_px"] > c["tolerance_px"]

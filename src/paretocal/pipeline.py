@@ -153,7 +153,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                                          stage.objective, X[i])))
         with _timed(timings, "verdict", progress):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
-                                       X[i], quality, stage.sampling_px())
+                                       X[i], quality, stage.sampling_px(),
+                                       cameras=stage.camera_groups())
     except Interrupted as exc:
         # The search is complete (and checkpointed): its front is what the run has to show.
         exc.X, exc.F, exc.generation = res.X, res.F, res.generations

@@ -369,13 +369,15 @@ def run_arguments(run_dir: str | Path) -> dict:
     path = next((run_dir / n for n in (CHECKPOINT_ARGS, RUN_ARGS)
                  if os.path.lexists(run_dir / n)), None)
     if path is None:
-        cameras = (sorted({p.parent.name for n in (RUN_ARGS, CHECKPOINT_ARGS)
-                           for p in run_dir.glob(f"*/{n}") if _rig_camera_of(p) is not None})
-                   if run_dir.is_dir() else [])
-        if cameras:
+        runs = ({p.parent.name: _rig_camera_of(p) for n in (RUN_ARGS, CHECKPOINT_ARGS)
+                 for p in run_dir.glob(f"*/{n}") if _rig_camera_of(p) is not None}
+                if run_dir.is_dir() else {})
+        if runs:
+            first = sorted(runs)[0]
+            one = "the cameras at once" if "," in runs[first] else "one camera"
             raise ParetocalError(f"{run_dir}: the run folder of a rig (cameras "
-                                 f"{', '.join(cameras)}); resume one camera with --resume "
-                                 f"{run_dir / cameras[0]}")
+                                 f"{', '.join(sorted(set(runs.values())))}); resume {one} "
+                                 f"with --resume {run_dir / first}")
         raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
                              "calibrate (or its run stopped before the first checkpoint, or "
                              "ran with --checkpoint-every 0)")
@@ -415,12 +417,16 @@ def run_arguments(run_dir: str | Path) -> dict:
 
 
 def _rig_camera_of(run_args: Path) -> str | None:
-    """The rig camera a run's arguments record, or None (a single-camera run, or a file
-    that cannot be read: the caller then reports the folder as it is)."""
+    """The rig camera a run's arguments record (a joint run: its cameras, joined), or None
+    (a single-camera run, or a file that cannot be read: the caller then reports the folder
+    as it is)."""
     try:
-        found = json.loads(_read_own(run_args)).get("rig_camera")
+        args = json.loads(_read_own(run_args))
+        found, joint = args.get("rig_camera"), args.get("joint")
     except (OSError, ValueError, AttributeError, ParetocalError):
         return None
+    if isinstance(joint, list) and all(isinstance(n, str) for n in joint):
+        return ", ".join(joint)
     return found if isinstance(found, str) else None
 
 

@@ -194,11 +194,24 @@ class Stage:
                                               [f.image.edge_uv for f in self.feats],
                                               ucb_k=settings.ucb_k)
 
-    def sampling_px(self) -> np.ndarray | None:
+    def sampling_px(self, frames=None) -> np.ndarray | None:
         """The LiDAR's sampling step in the image, (2,) px along a ring and between rings:
-        the median over the frames that measured it (None when none did)."""
-        got = [f.sampling_px for f in self.feats if f.sampling_px is not None]
+        the median over the frames (or the frames of index ``frames``) that measured it (None
+        when none did)."""
+        feats = self.feats if frames is None else [self.feats[k] for k in frames]
+        got = [f.sampling_px for f in feats if f.sampling_px is not None]
         return np.median(np.array(got), axis=0) if got else None
+
+    def camera_groups(self) -> dict | None:
+        """The cameras of a joint calibration (frames seen through a mount, named
+        ``CAMERA/FRAME`` by :func:`paretocal.inputs.joint_frames`): by camera name, the indices
+        of its frames and its :meth:`sampling_px`; None for one camera."""
+        if all(f.camera.mount is None for f in self.feats):
+            return None
+        groups: dict[str, list[int]] = {}
+        for k, f in enumerate(self.feats):
+            groups.setdefault(f.name.split("/", 1)[0], []).append(k)
+        return {name: (idx, self.sampling_px(idx)) for name, idx in groups.items()}
 
 
 def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int) -> CostModel:

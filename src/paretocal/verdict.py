@@ -14,6 +14,10 @@ agreement of the frames) and from two checks made for it after the calibration:
   random poses within the stated initial error around it, frame by frame. A true alignment
   explains every frame's edges clearly better than poses far away; images paired with clouds of
   another scene, or a scene without structure, do not.
+* **the cameras' agreement** (:func:`camera_evidence`, a joint calibration of several cameras
+  only): each camera's own frames polished alone from the result. A bias every frame of one
+  camera shares (or a camera-to-camera extrinsic that is not the rig's) is invisible to the
+  restart and the jackknife, but it pulls that camera's own optimum away from the others'.
 
 :func:`intervals` turns the jackknife standard errors, the image alignment the result reached
 (:func:`alignment_px`) and how far each axis can move for a pixel of displacement
@@ -267,16 +271,16 @@ def start_text(start: dict) -> str:
             "calibration is judged ok")
 
 
-def alignment_px(objective, x_opt: np.ndarray) -> float:
+def alignment_px(objective, x_opt: np.ndarray, frames=None) -> float:
     """How closely the image edges and the LiDAR's edges agree at ``x_opt`` (7,): the median
     distance in pixels from the edge feature points (depth and intensity edges) in view to the
     nearest image edge, read from the distance transforms as the objective reads them
-    (bilinear), over the points within the truncation (the others match no edge). NaN when
-    no edge point matches."""
+    (bilinear), over the points within the truncation (the others match no edge), of every
+    frame or of ``frames`` (indices). NaN when no edge point matches."""
     sc = objective.scene
     T = objective.transforms(np.atleast_2d(x_opt))[0]
     found = []
-    for f in range(sc.n_frames):
+    for f in range(sc.n_frames) if frames is None else frames:
         a, b = sc.point_start[f], sc.point_start[f + 1]
         edge = sc.group[a:b] != SMOOTH
         if not edge.any():
@@ -327,6 +331,62 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
         inv = np.where(null, np.inf, 1.0 / np.where(null, 1.0, w))
     var = np.where(V ** 2 > 1e-12, V ** 2 * inv[None, :], 0.0).sum(axis=1)
     return np.sqrt(var)
+
+
+def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
+    """Whether the cameras of a joint calibration agree (module docstring).
+
+    Each camera's frames alone are polished from the result's local optimum ``x_opt`` (7,)
+    (:class:`~paretocal.objective.FrameSubset`); the camera *agrees* when its own optimum moves
+    its feature points, in its own images, by no more than the bias its edges can be trusted
+    to (:func:`bias_tolerance_px` of its alignment at ``x_opt`` and its sampling step): the
+    bound the intervals allow a bias every frame shares. A camera with fewer than
+    :data:`RELIABLE_MIN_FRAMES` frames is not checked (its own optimum is mostly its frames'
+    noise).
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+    x_opt : ndarray, shape (7,)
+    cameras : dict
+        By camera name: ``(frames, sampling)``, the indices of its frames in the objective's
+        scene and its LiDAR sampling step in the image (2,) px, or None.
+
+    Returns
+    -------
+    dict
+        ``cameras``: per camera ``name``, ``frames``, ``checked``, and when checked
+        ``own_optimum_px`` (the displacement), ``tolerance_px``, ``agrees``,
+        ``separation_deg`` / ``separation_cm`` and the correction ``d`` (LiDAR frame, cm and
+        deg) from the result to the camera's own optimum; ``disagreeing``: the names of those
+        that do not agree.
+    """
+    from .decide import reprojection_deviation
+    from .objective import FrameSubset
+    from .quality import correction_between
+
+    sc = objective.scene
+    T0 = objective.transforms(np.atleast_2d(x_opt))[0]
+    out = []
+    for name, (idx, sampling) in cameras.items():
+        idx = np.asarray(idx, dtype=np.int64)
+        rec = {"name": name, "frames": int(len(idx)), "checked": len(idx) >= RELIABLE_MIN_FRAMES}
+        if rec["checked"]:
+            xc = local_optimum(FrameSubset(objective, idx), x_opt)
+            Tc = objective.transforms(xc[None])[0]
+            px = float(reprojection_deviation(Tc[None], T0, [sc.frame_xyz(f) for f in idx],
+                                              [sc.cameras[f] for f in idx], sc.z_min)[0])
+            tol = bias_tolerance_px(alignment_px(objective, x_opt, idx), sampling)
+            e = pose_error(Tc, T0)
+            d = correction_between(T0, Tc) * np.r_[[100.0] * 3, [1.0] * 3]
+            rec.update(own_optimum_px=round(px, 3), tolerance_px=round(float(tol), 3),
+                       agrees=bool(px <= tol),
+                       separation_deg=round(float(e["rotation_deg"]), 4),
+                       separation_cm=round(float(e["translation_cm"]), 3),
+                       d={a: round(float(v), 4) for a, v in zip(AXES, d)})
+        out.append(rec)
+    return {"cameras": out,
+            "disagreeing": [r["name"] for r in out if r["checked"] and not r["agrees"]]}
 
 
 def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
@@ -417,13 +477,15 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                    quality: dict, sampling: np.ndarray | None = None) -> dict:
+                    quality: dict, sampling: np.ndarray | None = None,
+                    cameras: dict | None = None) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring).
     ``quality`` is the run's quality report at the result; the intervals use their own
     jackknife, at the result's local optimum. ``sampling`` (2,): the LiDAR's sampling step
     in the image, px along u and v (:func:`~paretocal.features.prepare.sampling_px`, the
-    median over the frames), which bounds how well any frame can place an edge."""
+    median over the frames), which bounds how well any frame can place an edge. ``cameras``
+    (a joint calibration of several cameras): as for :func:`camera_evidence`."""
     restart = None
     if settings.decision.restarts > 0:
         restart = restart_evidence(objective, settings.search, settings.decision, n_min,
@@ -444,6 +506,8 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                                   bias=bias_tolerance_px(align, sampling) * per_px)}
     if restart is not None:
         out["restart"] = restart
+    if cameras is not None and len(cameras) > 1:
+        out["cameras"] = camera_evidence(objective, x_opt, cameras)
     return out
 
 
@@ -559,6 +623,16 @@ def reliability(result: "CalibrationResult") -> dict:
                        f" of {r['frames']} frames prefer it): the frames do not single out one "
                        "pose; add frames with more varied structure (buildings, poles, cars at "
                        "several distances), or a better --init with a smaller --init-error")
+    cams = ev.get("cameras") or {}
+    for name in cams.get("disagreeing", []):
+        c = next(c for c in cams["cameras"] if c["name"] == name)
+        reasons.append(
+            f"the cameras disagree: camera {name}'s frames alone prefer a pose "
+            f"{c['separation_deg']:.2g} deg / {c['separation_cm']:.2g} cm away, moving its "
+            f"points {c['own_optimum_px']:.2g} px (its edges are trusted to "
+            f"{c['tolerance_px']:.2g} px): a bias that camera's frames share, or calib.yaml's "
+            "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
+            "(without --joint) and compare")
     ct = ev.get("contrast") or {}
     weak_z = ct.get("z", np.inf) < CONTRAST_MIN_Z
     weak_frames = ct.get("frames_clear", 1.0) < CONTRAST_MIN_FRAMES_CLEAR

@@ -101,3 +101,31 @@ class CalibrationObjective:
     def evaluate(self, X: np.ndarray) -> np.ndarray:
         """``F`` of shape (C, 2): ``[f1, f2]`` for each candidate."""
         return np.column_stack([self.chamfer(X)["f1"], self.cost(X)["f2"]])
+
+
+class FrameSubset:
+    """The alignment objective over some of an objective's frames: ``f1`` the mean of their
+    per-frame terms, without the sampling-error charge (as the local optimum, the verdict and
+    the basin tests read it). For a joint calibration, one camera's frames alone.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+    frames : array_like of int
+        Indices of the frames in ``objective.scene``.
+    """
+
+    def __init__(self, objective: CalibrationObjective, frames):
+        self.objective = objective
+        self.frames = np.asarray(frames, dtype=np.int64)
+        self.scene = objective.scene
+
+    def transforms(self, X: np.ndarray) -> np.ndarray:
+        """As :meth:`CalibrationObjective.transforms`."""
+        return self.objective.transforms(X)
+
+    def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
+        """``f1`` (C,) and ``per_frame`` (C, len(frames)) for candidates X (C, 7); ``ucb_k``
+        is ignored (always 0)."""
+        term = self.objective.chamfer(X, ucb_k=0.0)["per_frame"][:, self.frames]
+        return {"f1": term.mean(axis=1), "per_frame": term}
