@@ -541,7 +541,7 @@ def camera_odometry(images: Sequence[np.ndarray], camera: Camera, *,  # noqa: PL
                     threshold_px: float = 1.0, min_inliers: int = 30,
                     min_parallax_ratio: float = 3.0, max_direction_sigma_deg: float = 10.0,
                     bootstrap: int = 40, max_ray_deg: float = 80.0,
-                    seed: int = 0) -> list[CameraPair]:
+                    seed: int = 0, image_feats: dict | None = None) -> list[CameraPair]:
     """Rotation and direction of travel between images of one camera.
 
     SIFT features, Lowe's ratio test, then OpenCV's essential matrix with RANSAC on the
@@ -583,6 +583,9 @@ def camera_odometry(images: Sequence[np.ndarray], camera: Camera, *,  # noqa: PL
         stretches them without bound towards 90 degrees).
     seed : int
         Randomness of RANSAC and of the bootstrap.
+    image_feats : dict, optional
+        :func:`image_features` of the images already extracted (with the same ``mask``,
+        ``features`` and ``max_ray_deg``), e.g. while the LiDAR's odometry ran.
 
     Returns
     -------
@@ -594,17 +597,13 @@ def camera_odometry(images: Sequence[np.ndarray], camera: Camera, *,  # noqa: PL
     pairs = [(int(i), int(j)) for i, j in pairs]
     if any(not 0 <= i < j < n for i, j in pairs):
         raise ValueError(f"pairs must satisfy 0 <= i < j < {n}")
-    sift = cv2.SIFT_create(nfeatures=int(features))
     f = 0.5 * float(camera.K[0, 0] + camera.K[1, 1])
     vs = _VOSettings(threshold_px / f, f, ratio, min_inliers, min_parallax_ratio,
                      max_direction_sigma_deg, bootstrap, seed)
-    cos_max = math.cos(math.radians(max_ray_deg))
-    feats: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for k in sorted({k for p in pairs for k in p}):
-        uv, desc = _features(images[k], mask, sift)
-        rays = camera.unproject(uv) if len(uv) else np.zeros((0, 3))
-        good = np.isfinite(rays).all(axis=1) & (np.nan_to_num(rays[:, 2]) > cos_max)
-        feats[k] = (rays[good], desc[good])
+    need = sorted({k for p in pairs for k in p})
+    feats = dict(image_feats or {})
+    feats.update(image_features(images, camera, [k for k in need if k not in feats], mask=mask,
+                                features=features, max_ray_deg=max_ray_deg))
     rng = np.random.default_rng(seed)
     out = []
     for i, j in pairs:
@@ -612,6 +611,23 @@ def camera_odometry(images: Sequence[np.ndarray], camera: Camera, *,  # noqa: PL
         pair = _camera_pair(i, j, feats[i], feats[j], vs, rng)
         pair.seconds = time.perf_counter() - t0
         out.append(pair)
+    return out
+
+
+def image_features(images: Sequence[np.ndarray], camera: Camera, indices=None, *,
+                   mask: np.ndarray | None = None, features: int = 4000,
+                   max_ray_deg: float = 80.0) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """SIFT features of the images of index ``indices`` (all by default) as
+    :func:`camera_odometry` matches them: by index, the unit rays (M, 3) of the keypoints
+    within ``max_ray_deg`` of the optical axis and their descriptors (M, 128)."""
+    sift = cv2.SIFT_create(nfeatures=int(features))
+    cos_max = math.cos(math.radians(max_ray_deg))
+    out = {}
+    for k in range(len(images)) if indices is None else indices:
+        uv, desc = _features(images[k], mask, sift)
+        rays = camera.unproject(uv) if len(uv) else np.zeros((0, 3))
+        good = np.isfinite(rays).all(axis=1) & (np.nan_to_num(rays[:, 2]) > cos_max)
+        out[int(k)] = (rays[good], desc[good])
     return out
 
 

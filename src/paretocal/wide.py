@@ -35,12 +35,13 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .config import Settings
-from .egomotion import camera_odometry, lidar_odometry, rotation_from_motion
+from .egomotion import camera_odometry, image_features, lidar_odometry, rotation_from_motion
 from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
 from .objective.photo import build_photo_scene, photo_cost
@@ -80,6 +81,8 @@ MIN_BAND_DEG = 1.5
 #: Differential evolution in each slice: population per dimension and generations.
 DE_POPSIZE = 10
 DE_GENERATIONS = 40
+#: Share of each frame's feature points the slices' search scores a pose with.
+SEARCH_SHARE = 1.0
 #: Slices whose best pose is polished in six degrees of freedom.
 POLISHED = 5
 #: Rounds of the search at most: each from the pose the last one kept, until two agree
@@ -252,8 +255,13 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     s = settings.search
     t0 = time.perf_counter()
     clouds = [f.points[:, :3] for f in frames]
-    lo = lidar_odometry(clouds, points=ODOMETRY_POINTS, seed=s.seed)
     cam = frames[0].camera
+    # The images' features do not depend on the LiDAR's odometry: extracted beside it (OpenCV
+    # and the registration's numpy and scipy work release the interpreter).
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(image_features, [f.image for f in frames], cam)
+        lo = lidar_odometry(clouds, points=ODOMETRY_POINTS, seed=s.seed)
+        image_feats = pending.result()
     rng_m = float(np.median(np.linalg.norm(clouds[0], axis=1)))
     focal = float(cam.K[0, 0])
     need = baseline_m(cam.width, focal, rng_m, MIN_PARALLAX_SHARE)
@@ -270,7 +278,7 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
         return out
     pairs = camera_pairs(steps, baseline_m(cam.width, focal, rng_m, PARALLAX_SHARE), need)
     pairs_out = camera_odometry([f.image for f in frames], cam, pairs=pairs, bootstrap=20,
-                                seed=s.seed)
+                                seed=s.seed, image_feats=image_feats)
     mr = rotation_from_motion(lo, pairs_out, T0[:3, :3], T0[:3, 3], t_sigma_m=s.init_error_m)
     out.seconds["odometry"] = time.perf_counter() - t0
     free_lidar = None if mr.free_axis is None else (mr.R.T @ mr.free_axis)
@@ -356,7 +364,8 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     t1 = time.perf_counter()
     stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation")
     obj = stage.objective
-    n = stage.n_max
+    # The slices are searched with a share of each frame's points (the polish uses them all).
+    n = max(stage.n_min, int(round(SEARCH_SHARE * stage.n_max)))
     axes = _search_axes(mr)
     resid = mr.residual_deg if np.isfinite(mr.residual_deg) else 0.0
     band = float(np.clip(BAND_RESIDUALS * resid, MIN_BAND_DEG, s.init_error_deg))
