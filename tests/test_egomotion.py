@@ -255,6 +255,23 @@ def test_kitti_directions_of_travel_agree(kitti, kitti_motion):
     assert ag.rotation_deg[0] < 0.4
 
 
+def test_image_features_extracted_beforehand_give_the_same_pairs(kitti, kitti_motion):
+    """The wide start extracts the images' features while the LiDAR's odometry runs: given
+    to ``camera_odometry``, they give the very pair it finds on its own."""
+    from paretocal.egomotion import image_features
+
+    _, (alone,) = kitti_motion
+    images = [f.image for f in kitti]
+    feats = image_features(images, kitti[0].camera, [0, 10])
+    assert set(feats) == {0, 10} and feats[0][0].shape[1] == 3
+    (given,) = camera_odometry(images, kitti[0].camera, pairs=[(0, 10)], bootstrap=20,
+                               image_feats=feats)
+    np.testing.assert_array_equal(given.R, alone.R)
+    np.testing.assert_array_equal(given.direction, alone.direction)
+    assert (given.inliers, given.direction_sigma_deg) == (alone.inliers,
+                                                           alone.direction_sigma_deg)
+
+
 @pytest.fixture(scope="module")
 def pandaset():
     root = data_dir() / "pandaset" / "front"
