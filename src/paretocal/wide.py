@@ -81,8 +81,6 @@ MIN_BAND_DEG = 1.5
 #: Differential evolution in each slice: population per dimension and generations.
 DE_POPSIZE = 10
 DE_GENERATIONS = 40
-#: Share of each frame's feature points the slices' search scores a pose with.
-SEARCH_SHARE = 1.0
 #: Slices whose best pose is polished in six degrees of freedom.
 POLISHED = 5
 #: Rounds of the search at most: each from the pose the last one kept, until two agree
@@ -364,8 +362,9 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     t1 = time.perf_counter()
     stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation")
     obj = stage.objective
-    # The slices are searched with a share of each frame's points (the polish uses them all).
-    n = max(stage.n_min, int(round(SEARCH_SHARE * stage.n_max)))
+    # Every point: with a quarter of them the slices' search lost 2 of 10 KITTI starts from
+    # +-20 deg / 1.5 m (288 cm off) that it finds with all of them, for 4 s less.
+    n = stage.n_max
     axes = _search_axes(mr)
     resid = mr.residual_deg if np.isfinite(mr.residual_deg) else 0.0
     band = float(np.clip(BAND_RESIDUALS * resid, MIN_BAND_DEG, s.init_error_deg))
