@@ -127,7 +127,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         stage = Stage(frames, T_init, T_init, settings, report("features"), rings,
                       cost=CostModel(**dict(stored, probe=dict(
                           stored["probe"], source=f"checkpoint {checkpoint.path}")))
-                      if stored else None)
+                      if stored else None,
+                      images=None if wide is None else wide.images)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
         log_features(stage.feats)

@@ -126,6 +126,9 @@ class WideStart:
         Objective evaluations of the search and the polish.
     seconds : dict
         Wall time of the odometry, the search and the polish (s).
+    images : list or None
+        The frames' image features (:attr:`paretocal.stage.Stage.images`), which do not
+        depend on the pose: each round and the calibration that follows reuse them.
     """
 
     T: np.ndarray | None
@@ -139,6 +142,7 @@ class WideStart:
     evaluations: int = 0
     seconds: dict = field(default_factory=dict)
     rounds: list = field(default_factory=list)
+    images: list | None = field(default=None, repr=False)
 
     @property
     def applied(self) -> bool:
@@ -360,7 +364,9 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     s = settings.search
     c0 = -T_start[:3, :3].T @ T_start[:3, 3]
     t1 = time.perf_counter()
-    stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation")
+    stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation",
+                  images=out.images)
+    out.images = stage.images
     obj = stage.objective
     # Every point: with a quarter of them the slices' search lost 2 of 10 KITTI starts from
     # +-20 deg / 1.5 m (288 cm off) that it finds with all of them, for 4 s less.
