@@ -165,6 +165,30 @@ def test_blind_copy_of_aimotive(acc, data, tmp_path):
     assert (copy / "points").resolve() == (data / "aimotive" / "points").resolve()
 
 
+def test_blind_copy_of_the_pandaset_rig(acc, data, tmp_path):
+    """A rig's blind copy moves the LiDAR: every camera's T_cam_lidar is its reference with
+    the same correction undone, so the cameras keep their relative poses; the run is
+    ``calibrate --joint`` and its first camera's result is compared."""
+    from paretocal.io import rig_cameras
+
+    root = data / "pandaset"
+    if not (root / "calib.yaml").is_file():
+        pytest.skip("PandaSet sample not present")
+    assert acc.layout_of(root) == "rig"
+    refs = acc.rig_references(root)
+    T0 = _start(refs[0])
+    G = invert(refs[0]) @ T0
+    ds = acc.Dataset("rig", "rig", root, refs[0])
+    copy = acc.make_copy(ds, T0, tmp_path)
+    moved = [src.frames[0].T_ref for _, src in rig_cameras(copy)]
+    assert len(moved) == len(refs) == 3
+    np.testing.assert_allclose(moved[0], T0, atol=1e-12)
+    for T, R in zip(moved, refs):
+        np.testing.assert_allclose(T, R @ G, atol=1e-12)
+    np.testing.assert_allclose(moved[1] @ invert(moved[0]), refs[1] @ invert(refs[0]),
+                               atol=1e-9)
+
+
 def test_kitti_blind_copies_and_trial_starts(acc, raw_date, object_dir, tmp_path):
     T_ref = detect_source(raw_date).frames[0].T_ref
     T0 = _start(T_ref)
