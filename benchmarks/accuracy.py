@@ -347,6 +347,18 @@ def folder_reference(root: Path) -> np.ndarray:
     return check_rigid(data["T_cam_lidar"], str(cpath))
 
 
+def _linked_folder(root: Path, dst: Path) -> Path:
+    """``dst/<root's name>`` holding a symbolic link to the resolved target of every entry of
+    ``root`` but its ``calib.yaml`` (so relative references in a rewritten calib.yaml hold)."""
+    out = Path(dst) / Path(root).resolve().name
+    out.mkdir(parents=True)
+    for entry in sorted(Path(root).iterdir()):
+        if entry.name != "calib.yaml":
+            (out / entry.name).symlink_to(resolve_entry(entry),
+                                          target_is_directory=resolve_entry(entry).is_dir())
+    return out
+
+
 def blind_copy_folder(root: Path, T_cam_lidar: np.ndarray, dst: Path) -> Path:
     """A generic folder whose ``calib.yaml`` holds ``T_cam_lidar``, every other key unchanged.
 
@@ -356,12 +368,7 @@ def blind_copy_folder(root: Path, T_cam_lidar: np.ndarray, dst: Path) -> Path:
     """
     root = Path(root)
     data = read_mapping(root / "calib.yaml")
-    out = Path(dst) / root.resolve().name
-    out.mkdir(parents=True)
-    for entry in sorted(root.iterdir()):
-        if entry.name != "calib.yaml":
-            (out / entry.name).symlink_to(resolve_entry(entry),
-                                          target_is_directory=resolve_entry(entry).is_dir())
+    out = _linked_folder(root, dst)
     data = dict(data)
     data["T_cam_lidar"] = _rows(T_cam_lidar)
     header = (f"# Blind copy of {root.resolve()} for an accuracy trial: T_cam_lidar is the\n"
@@ -396,12 +403,7 @@ def blind_copy_rig(root: Path, G: np.ndarray, dst: Path) -> Path:
     root = Path(root)
     data = dict(read_mapping(root / "calib.yaml"))
     refs = rig_references(root)
-    out = Path(dst) / root.resolve().name
-    out.mkdir(parents=True)
-    for entry in sorted(root.iterdir()):
-        if entry.name != "calib.yaml":
-            (out / entry.name).symlink_to(resolve_entry(entry),
-                                          target_is_directory=resolve_entry(entry).is_dir())
+    out = _linked_folder(root, dst)
     cams = data["cameras"]
     entries = list(cams.values()) if isinstance(cams, dict) else cams
     moved = [dict(e, T_cam_lidar=_rows(T @ G)) for e, T in zip(entries, refs)]
