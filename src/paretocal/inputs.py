@@ -344,18 +344,31 @@ def load_joint(source, settings: Settings, cameras: list[str] | None = None
         found = [(n, s) for n, s in found if n in cameras]
     loaded = load_rig_frames(found, settings.frames)
     _check_stated(loaded)
-    clouds = {name: tuple((f.name, str(f.points_path)) for f in fr)
-              for name, fr in loaded.items()}
-    done: dict = {}
-    for key in dict.fromkeys(clouds.values()):
-        # Once per set of clouds, the rings judged where any camera over them looks.
-        views = [(loaded[n][0].camera, loaded[n][0].T_ref) for n in loaded
-                 if clouds[n] == key and loaded[n]]
-        done[key] = prepare_lidar(loaded[next(n for n in loaded if clouds[n] == key)],
-                                  settings, views)
-    frames = joint_frames({name: done[clouds[name]].for_camera(fr)
-                           for name, fr in loaded.items()})
-    first = done[clouds[next(iter(loaded))]]
-    rings = [r for name in loaded for r in done[clouds[name]].rings]
+    steps = rig_lidar_steps(loaded, settings)
+    frames = joint_frames({name: steps[name].for_camera(fr) for name, fr in loaded.items()})
+    first = steps[next(iter(loaded))]
+    rings = [r for name in loaded for r in steps[name].rings]
     return frames, LidarSteps(frames, first.lidar_info, rings, first.motion_info,
                               lidar_settings_key(settings))
+
+
+def rig_lidar_steps(frames: dict[str, list[Frame]], settings: Settings,
+                    T_views: dict | None = None) -> dict[str, LidarSteps]:
+    """The LiDAR-only steps of a rig's cameras (:func:`prepare_lidar`), done once per set of
+    clouds: by camera name, the steps over its frames' clouds, one object for the cameras
+    whose selected frames use the same clouds (every camera's, when all cameras have an
+    image of every selected frame). The rings are judged where any camera over those clouds
+    looks: at ``T_views[name]`` (an initial extrinsic), else at its frames' ``T_ref``."""
+    T_views = T_views or {}
+    clouds = {name: tuple((f.name, str(f.points_path)) for f in fr)
+              for name, fr in frames.items()}
+    done: dict = {}
+    for key in dict.fromkeys(clouds.values()):
+        over = [n for n in frames if clouds[n] == key]
+        views = []
+        for n in over:
+            T = T_views.get(n, frames[n][0].T_ref if frames[n] else None)
+            if T is not None:
+                views.append((frames[n][0].camera, np.asarray(T, dtype=np.float64)))
+        done[key] = prepare_lidar(frames[over[0]], settings, views)
+    return {name: done[clouds[name]] for name in frames}

@@ -39,7 +39,7 @@ from .camera import project
 from .config import Settings, dataset_settings
 from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
-from .inputs import prepare_lidar
+from .inputs import rig_lidar_steps
 from .io import load_rig_frames, rig_cameras
 from .io.atomic import atomic_write_text
 from .quality import AXES
@@ -107,20 +107,15 @@ def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
         return _calibrate_joint(source, out, settings, T_inits, [n for n, _ in found],
                                 figures, checkpoint_every, progress, on_camera, t0)
     frames = load_rig_frames(found, settings.frames)
-    steps: dict = {}
+    steps = rig_lidar_steps(frames, settings, T_inits)
     results: dict[str, CalibrationResult] = {}
     for name, _ in found:
-        # The LiDAR-only steps once per set of clouds (every camera's, when all cameras have
-        # an image of every selected frame).
-        key = tuple((f.name, str(f.points_path)) for f in frames[name])
-        if key not in steps:
-            steps[key] = prepare_lidar(frames[name], settings, _views(frames, T_inits, key))
         try:
             results[name] = calibrate_run(source, out / name, T_inits.get(name), settings,
                                           frames=frames[name], figures=figures,
                                           checkpoint_every=checkpoint_every,
                                           progress=progress, rig_camera=name,
-                                          lidar=steps[key], dataset_options=False)
+                                          lidar=steps[name], dataset_options=False)
         except Interrupted as exc:
             exc.run_dir = out / name       # the run folder to resume
             raise
@@ -130,7 +125,8 @@ def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
         if on_camera is not None:
             on_camera(name, results[name])
     summary = rig_summary(results, settings.features.z_min)
-    summary.update(source=str(source.resolve()), lidar_steps_done=len(steps),
+    summary.update(source=str(source.resolve()),
+                   lidar_steps_done=len({id(v) for v in steps.values()}),
                    wall_s=round(time.perf_counter() - t0, 2))
     if len(results) > 1:
         atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
@@ -196,17 +192,6 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
     return {"joint": True, "cameras": cams, "pairs": [],
             "frames_per_camera": {n: sum(f.split("/", 1)[0] == n for f in result.frames)
                                   for n in names}}
-
-
-def _views(frames: dict, T_inits: dict, key: tuple) -> list:
-    """``(camera, initial extrinsic)`` of every camera whose frames are over the clouds
-    ``key``: the LiDAR steps done once for them judge the rings where any of them looks."""
-    views = []
-    for name, fr in frames.items():
-        T = T_inits.get(name, fr[0].T_ref)
-        if T is not None and tuple((f.name, str(f.points_path)) for f in fr) == key:
-            views.append((fr[0].camera, np.asarray(T, dtype=np.float64)))
-    return views
 
 
 def _err(T: np.ndarray, T_ref: np.ndarray) -> dict:
