@@ -12,7 +12,7 @@ from paretocal.cli import main
 from paretocal.config import Settings
 from paretocal.errors import InputError, ParetocalError
 from paretocal.geometry import invert, pose_error
-from paretocal.io import detect_source, is_rig, load_rig_frames, rig_cameras
+from paretocal.io import detect_source, is_rig, load_rig_frames, read_extrinsic, rig_cameras
 
 from .conftest import data_dir
 
@@ -304,6 +304,10 @@ def test_joint_run_from_the_command_line(tmp_path, capsys):
     np.testing.assert_allclose(T["left"] @ invert(T["front"]),
                                T_ref["left"] @ invert(T_ref["front"]), atol=1e-7)
     assert {c["verdict"] for c in summary["cameras"]} == {doc["reliability"]["verdict"]}
+    for c in summary["cameras"]:
+        assert c["extrinsic_file"] == f"extrinsic_{c['name']}.yaml"
+        np.testing.assert_allclose(read_extrinsic(out / c["extrinsic_file"]), T[c["name"]],
+                                   atol=1e-8)
     assert not (out / "front").exists() and not (out / "left").exists()
 
 

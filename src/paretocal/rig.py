@@ -40,7 +40,7 @@ from .config import Settings, dataset_settings
 from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
 from .inputs import rig_lidar_steps
-from .io import load_rig_frames, rig_cameras
+from .io import load_rig_frames, rig_cameras, write_extrinsic
 from .io.atomic import atomic_write_text
 from .quality import AXES
 from .result import CalibrationResult
@@ -162,18 +162,25 @@ def _calibrate_joint(source: Path, out: Path, settings: Settings, T_inits: dict,
 def write_joint_summary(result: CalibrationResult, run_dir: str | Path, names: list[str],
                         source: str | Path, **extra) -> dict:
     """Write rig.json beside the joint run folder ``run_dir`` (:func:`joint_summary`, with
-    the rig folder ``source`` and ``extra``); return its content."""
+    the rig folder ``source`` and ``extra``) and each camera's extrinsic as
+    ``extrinsic_<name>.yaml``; return rig.json's content."""
     run_dir = Path(run_dir)
     summary = joint_summary(result, names)
     summary.update(source=str(Path(source).resolve()), **extra)
+    verdict = (result.reliability or {}).get("verdict")
+    for cam in summary["cameras"]:
+        # Each camera's extrinsic as a file of its own (an --init file), beside rig.json.
+        write_extrinsic(run_dir.parent / cam["extrinsic_file"], np.asarray(cam["T_cam_lidar"]),
+                        f"camera {cam['name']} of a joint calibration ({run_dir.name}/); "
+                        f"verdict {verdict}")
     atomic_write_text(run_dir.parent / RIG_JSON, json.dumps(summary, indent=1) + "\n")
     return summary
 
 
 def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
     """rig.json's content for a joint run: every camera's extrinsic (its mount on the first
-    camera's result), the shared verdict and intervals; no pairs (their relative poses are
-    calib.yaml's)."""
+    camera's result) and the name of the file :func:`write_joint_summary` writes it to, the
+    shared verdict and intervals; no pairs (their relative poses are calib.yaml's)."""
     mounts = {}
     for f in result.sweeps or []:
         name = f.name.split("/", 1)[0]
@@ -184,7 +191,8 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
         M = mounts[name]
         T, T0 = M @ result.T_cam_lidar, M @ result.T_init
         ref = None if result.T_ref is None else _err(T, M @ result.T_ref)
-        cams.append({"name": name, "run": JOINT_RUN, "T_cam_lidar": _matrix(T),
+        cams.append({"name": name, "run": JOINT_RUN, "extrinsic_file": f"extrinsic_{name}.yaml",
+                     "T_cam_lidar": _matrix(T),
                      "T_init": _matrix(T0), "T_camera_first": _matrix(M),
                      "verdict": rel.get("verdict"), "reasons": rel.get("reasons", []),
                      "reference_error": ref,
