@@ -325,6 +325,12 @@ def joint_frames(frames: dict[str, list[Frame]]) -> list[Frame]:
     return out
 
 
+def joint_camera(frame_name: str) -> str:
+    """The camera a frame of a joint calibration belongs to: :func:`joint_frames` names its
+    frames ``CAMERA/FRAME`` (camera names hold no ``/``)."""
+    return frame_name.split("/", 1)[0]
+
+
 def _check_stated(frames: dict[str, list[Frame]]) -> None:
     missing = [n for n in frames if not frames[n] or frames[n][0].T_ref is None]
     if missing:

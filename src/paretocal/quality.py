@@ -200,16 +200,18 @@ def local_optimum(objective, x: np.ndarray, iters: int = 15):
     return Z[0] if x.ndim == 1 else Z
 
 
-def displacement_px(objective, x: np.ndarray, y: np.ndarray):
+def displacement_px(objective, x: np.ndarray, y: np.ndarray, frames=None):
     """Mean pixel distance between the feature points' projections under pose x (7,) and
-    pose y (7,) (a float), or each of poses y (k, 7) (an array (k,))."""
+    pose y (7,) (a float), or each of poses y (k, 7) (an array (k,)), over every frame or
+    the frames of index ``frames``."""
     from .decide import reprojection_deviation
 
     sc = objective.scene
+    idx = range(sc.n_frames) if frames is None else frames
     y = np.asarray(y, dtype=np.float64)
     T = objective.transforms(np.vstack([x, np.atleast_2d(y)]))
-    d = reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in range(sc.n_frames)],
-                               sc.cameras, sc.z_min)
+    d = reprojection_deviation(T[1:], T[0], [sc.frame_xyz(f) for f in idx],
+                               [sc.cameras[f] for f in idx], sc.z_min)
     return float(d[0]) if y.ndim == 1 else d
 
 

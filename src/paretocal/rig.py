@@ -39,7 +39,7 @@ from .camera import project
 from .config import Settings, dataset_settings
 from .errors import Interrupted, ParetocalError, SettingsError
 from .geometry import correction_params, invert, pose_error
-from .inputs import rig_lidar_steps
+from .inputs import joint_camera, rig_lidar_steps
 from .io import load_rig_frames, rig_cameras, write_extrinsic
 from .io.atomic import atomic_write_text
 from .quality import AXES
@@ -183,8 +183,8 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
     shared verdict and intervals; no pairs (their relative poses are calib.yaml's)."""
     mounts = {}
     for f in result.sweeps or []:
-        name = f.name.split("/", 1)[0]
-        mounts.setdefault(name, np.eye(4) if f.camera.mount is None else f.camera.mount)
+        mounts.setdefault(joint_camera(f.name),
+                          np.eye(4) if f.camera.mount is None else f.camera.mount)
     rel = result.reliability or {}
     cams = []
     for name in names:
@@ -198,7 +198,7 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
                      "reference_error": ref,
                      "intervals_95": (rel.get("intervals") or {}).get("half_width")})
     return {"joint": True, "cameras": cams, "pairs": [],
-            "frames_per_camera": {n: sum(f.split("/", 1)[0] == n for f in result.frames)
+            "frames_per_camera": {n: sum(joint_camera(f) == n for f in result.frames)
                                   for n in names}}
 
 

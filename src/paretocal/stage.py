@@ -15,6 +15,7 @@ from .errors import DegenerateSceneError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
 from .features.rings import Rings
+from .inputs import joint_camera
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
@@ -210,7 +211,7 @@ class Stage:
             return None
         groups: dict[str, list[int]] = {}
         for k, f in enumerate(self.feats):
-            groups.setdefault(f.name.split("/", 1)[0], []).append(k)
+            groups.setdefault(joint_camera(f.name), []).append(k)
         return {name: (idx, self.sampling_px(idx)) for name, idx in groups.items()}
 
 

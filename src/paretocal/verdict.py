@@ -361,11 +361,9 @@ def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
         deg) from the result to the camera's own optimum; ``disagreeing``: the names of those
         that do not agree.
     """
-    from .decide import reprojection_deviation
     from .objective import FrameSubset
     from .quality import correction_between
 
-    sc = objective.scene
     T0 = objective.transforms(np.atleast_2d(x_opt))[0]
     out = []
     for name, (idx, sampling) in cameras.items():
@@ -374,8 +372,7 @@ def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
         if rec["checked"]:
             xc = local_optimum(FrameSubset(objective, idx), x_opt)
             Tc = objective.transforms(xc[None])[0]
-            px = float(reprojection_deviation(Tc[None], T0, [sc.frame_xyz(f) for f in idx],
-                                              [sc.cameras[f] for f in idx], sc.z_min)[0])
+            px = displacement_px(objective, x_opt, xc, idx)
             tol = bias_tolerance_px(alignment_px(objective, x_opt, idx), sampling)
             e = pose_error(Tc, T0)
             d = correction_between(T0, Tc) * np.r_[[100.0] * 3, [1.0] * 3]
