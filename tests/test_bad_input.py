@@ -736,6 +736,16 @@ def _fake_result(**over):
                "apart that the frames do not tell apart"}},
      "the wide search found two poses 2.9 deg / 203 cm apart"),
     ({"wide": {"applied": True, "ambiguity": None, "disagree": True}}, None),
+    # Photo-consistency checks the calibration that followed a wide start.
+    ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
+        "agree": False, "result": 0.512, "rival": 0.47, "separation_deg": 3.1,
+        "separation_cm": 142.0, "p": 0.0}}},
+     "photo-consistency disagrees: the images agree clearly better at a pose 3.1 deg / 142 cm "
+     "from the "
+     "result (cost 0.470 against 0.512)"),
+    ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
+        "agree": True, "result": 0.47, "rival": 0.512, "separation_deg": 3.1,
+        "separation_cm": 142.0, "p": 1.0}}}, None),
     # The jackknife of the intervals (at the local optimum) decides when there is one.
     ({"quality": {"jackknife_se": {"x": 0.1, "y": 0.1, "z": 13.6, "yaw": 0.1, "pitch": 0.1,
                                    "roll": 0.1}},

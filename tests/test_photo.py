@@ -112,6 +112,27 @@ def test_the_true_extrinsic_costs_least(synthetic, axis, step):
     assert c[0] < c[1] and c[0] < c[2], c
 
 
+def test_the_wide_start_photo_check_flags_a_result_in_a_less_consistent_basin(synthetic):
+    """paretocal.wide.photo_check: a result at the truth agrees with the poses the wide start
+    tried; a result in a distinct basin (1 m and 4 deg off) disagrees when the truth was tried;
+    poses within the photo-consistency's resolution are not compared."""
+    from paretocal.wide import WideStart, photo_check
+
+    scene, _ = synthetic
+    off = X_TRUE @ correction_matrix(np.r_[1.0, 0.0, 0.0, 4.0, 0.0, 0.0])
+    near = X_TRUE @ correction_matrix(np.r_[0.05, 0.0, 0.0, 0.2, 0.0, 0.0])
+    w = WideStart(X_TRUE, off, scene=scene, tried=[X_TRUE, near])
+    good = photo_check(w, X_TRUE)
+    assert good["agree"] and good["rival"] > good["result"] and w.photo is good
+    assert photo_check(w, X_TRUE) == good                              # seeded
+    assert good["separation_cm"] == pytest.approx(100.0, abs=1.0)     # the start given
+    bad = photo_check(w, off)
+    assert not bad["agree"] and bad["rival"] < bad["result"] and bad["p"] < 0.01
+    alone = photo_check(WideStart(X_TRUE, X_TRUE, scene=scene, tried=[near]), X_TRUE)
+    assert alone["agree"] and alone["rival"] is None
+    assert photo_check(WideStart(None, off), off) is None           # did not apply
+
+
 def test_a_pose_that_sees_nothing_costs_what_unrelated_pixels_cost(synthetic):
     scene, _ = synthetic
     away = X_TRUE @ correction_matrix(np.r_[0, 0, 0, 180.0, 0, 0])   # looking backwards

@@ -95,3 +95,5 @@ def test_calibrate_runs_the_wide_start_and_records_it(raw_frames):
     e = pose_error(np.array(w["T_found"]), T_ref)
     assert e["rotation_deg"] < 0.5 and e["translation_cm"] < 5.0
     assert not w["ambiguous"] and w["rounds"] and w["basins"][0]["photo"] > 0
+    # Photo-consistency agrees with the calibration that followed.
+    assert w["photo_check"]["agree"], w["photo_check"]

@@ -27,7 +27,7 @@ from .search.checkpoint import Checkpoint, fingerprint
 from .inputs import (LidarSteps, compensate_motion, lidar_settings_key, locate_lidar,  # noqa: F401
                      resolve_init, sweep_rings, warn_rings, warn_unlocated, describe_inputs)
 from .objective import get_evaluator
-from .wide import after_settings, wanted, wide_start
+from .wide import after_settings, photo_check, wanted, wide_start
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
 from .stage import (DEFAULT_N_MIN, MIN_EDGE_PIXELS, Stage, check_scene, feature_counts,  # noqa: F401
@@ -156,6 +156,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
                                        X[i], quality, stage.sampling_px(),
                                        cameras=stage.camera_groups())
+            if wide is not None:
+                photo_check(wide, T[i])
     except Interrupted as exc:
         # The search is complete (and checkpointed): its front is what the run has to show.
         exc.X, exc.F, exc.generation = res.X, res.F, res.generations

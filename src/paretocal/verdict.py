@@ -537,6 +537,14 @@ def reliability(result: "CalibrationResult") -> dict:
     wide = getattr(result, "wide", None) or {}
     if wide.get("ambiguity"):
         reasons.append(wide["ambiguity"])
+    photo = wide.get("photo_check") or {}
+    if photo.get("agree") is False:
+        reasons.append(
+            f"photo-consistency disagrees: the images agree clearly better at a pose "
+            f"{photo['separation_deg']:.1f} deg / {photo['separation_cm']:.0f} cm from the result "
+            f"(cost {photo['rival']:.3f} against {photo['result']:.3f}), a basin the edges "
+            "missed or were fooled out of; give a better start, or frames with structure at "
+            "several distances")
     s = result.settings.search
     bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
     x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)

@@ -46,7 +46,7 @@ from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
 from .objective.photo import build_photo_scene, photo_cost
 from .quality import local_optimum
-from .search.basin import AMBIGUOUS_P, USABLE_DEG, USABLE_M, paired_preference
+from .search.basin import AMBIGUOUS_P, CLEAR_P, USABLE_DEG, USABLE_M, paired_preference
 from .stage import Stage
 
 
@@ -93,6 +93,10 @@ PHOTO_POINTS = 30_000
 #: scored within 0.006 of it) but told every basin a metre or more away from the truth's.
 PHOTO_DISTINCT_M = 0.5
 PHOTO_DISTINCT_DEG = 2.0
+#: The photo-consistency check's paired bootstrap resamples the map in blocks of this size (m):
+#: neighbouring points read the same image patch, so they are not independent evidence.
+PHOTO_BLOCK_M = 2.0
+PHOTO_RESAMPLES = 400
 
 
 @dataclass
@@ -129,6 +133,14 @@ class WideStart:
     images : list or None
         The frames' image features (:attr:`paretocal.stage.Stage.images`), which do not
         depend on the pose: each round and the calibration that follows reuse them.
+    photo : dict or None
+        The photo-consistency check of the calibration that followed (:func:`photo_check`).
+    scene : PhotoScene or None
+        The photo-consistency map (kept for :func:`photo_check`; not written).
+    tried : list of ndarray
+        Every round's polished poses (4, 4) (kept for :func:`photo_check`; not written).
+    seed : int
+        The search's seed (:func:`photo_check`'s bootstrap).
     """
 
     T: np.ndarray | None
@@ -143,6 +155,10 @@ class WideStart:
     seconds: dict = field(default_factory=dict)
     rounds: list = field(default_factory=list)
     images: list | None = field(default=None, repr=False)
+    photo: dict | None = None
+    scene: object = field(default=None, repr=False)
+    seed: int = 0
+    tried: list = field(default_factory=list, repr=False)
 
     @property
     def applied(self) -> bool:
@@ -167,7 +183,8 @@ class WideStart:
                 "moved_cm": None if moved is None else round(float(moved["translation_cm"]), 2),
                 "motion": self.motion, "basins": self.basins, "ambiguous": self.ambiguous,
                 "ambiguity": self.ambiguity, "disagree": self.disagree, "rounds": self.rounds,
-                "comparison": self.comparison, "evaluations": int(self.evaluations),
+                "comparison": self.comparison, "photo_check": self.photo,
+                "evaluations": int(self.evaluations),
                 "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
 
 
@@ -318,6 +335,7 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                               [f.camera for f in frames], view=_motion_start(mr, T0),
                               max_points=PHOTO_POINTS, rng=s.seed)
     out.seconds["photo"] = time.perf_counter() - t3
+    out.scene, out.seed = scene, int(s.seed)
     # Rounds: the search from the start, then again from the pose it kept (the points are
     # chosen at the motion's rotation with the start's camera centre, so a start metres off
     # sees other points than the truth does: a second look from the first answer sees what
@@ -422,6 +440,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     Z, f = Z[order], f[order]
     T = obj.transforms(Z)
     pc = photo_cost(scene, T)["cost"]
+    out.tried += list(T)
     out.seconds["polish"] = out.seconds.get("polish", 0.0) + time.perf_counter() - t2
     # Photo-consistency tells far basins apart where the edges can be fooled (a camera
     # metres along its optical axis), though not poses a few decimetres apart.
@@ -466,6 +485,77 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                              "by": "photo" if disagree else "edges"}}
 
 
+def photo_check(wide: WideStart, T_result: np.ndarray) -> dict | None:
+    """Whether photo-consistency agrees with the calibration that followed a wide start.
+
+    The edge objective and photo-consistency share no feature, so a bias that every frame's
+    edges share (a wrong basin the edges prefer) shows as a pose photo-consistency prefers
+    elsewhere. The result is compared with every pose the wide start polished in any round and
+    with the start given, those in a distinct basin (farther than :data:`PHOTO_DISTINCT_M` or
+    :data:`PHOTO_DISTINCT_DEG`: photo-consistency does not resolve poses a few decimetres
+    apart); the check fails when the most photo-consistent of them is clearly more so than
+    the result: in all but :data:`~paretocal.search.basin.CLEAR_P` of a paired bootstrap over
+    the map (blocks of :data:`PHOTO_BLOCK_M`, seeded; two poses of one basin a few decimetres
+    apart differ by less than that noise).
+
+    Parameters
+    ----------
+    wide : WideStart
+        An applied wide start (its map and the poses it tried).
+    T_result : ndarray, shape (4, 4)
+        The calibration's result (``T_cam_lidar``).
+
+    Returns
+    -------
+    dict or None
+        ``agree`` (bool), ``result`` (the result's cost), ``rival`` (the most
+        photo-consistent distinct pose's cost, or None when there is none), its
+        ``separation_deg`` / ``separation_cm`` from the result and ``p`` (the share of the
+        resamples in which it is not better); None when the wide start did not apply. Also
+        stored as ``wide.photo``.
+    """
+    if not wide.applied or wide.scene is None:
+        return None
+    T_result = np.asarray(T_result, dtype=np.float64)
+    others = []
+    for T in list(wide.tried) + [wide.T_given]:
+        e = pose_error(T, T_result)
+        if e["translation_cm"] > 100 * PHOTO_DISTINCT_M or e["rotation_deg"] > PHOTO_DISTINCT_DEG:
+            others.append((T, e))
+    pc = photo_cost(wide.scene, np.array([T_result] + [T for T, _ in others]))
+    cost = pc["cost"]
+    out = {"agree": True, "result": round(float(cost[0]), 4), "rival": None,
+           "separation_deg": None, "separation_cm": None, "p": None}
+    if others:
+        k = 1 + int(np.argmin(cost[1:]))
+        e = others[k - 1][1]
+        p = _photo_p(wide.scene.xyz, pc["point_weight"][[0, k]], pc["point_variance"][[0, k]],
+                     float(pc["prior"]), wide.seed)
+        out.update(agree=bool(p >= CLEAR_P), rival=round(float(cost[k]), 4),
+                   separation_deg=round(float(e["rotation_deg"]), 2),
+                   separation_cm=round(float(e["translation_cm"]), 1), p=round(p, 4))
+    wide.photo = out
+    return out
+
+
+def _photo_p(xyz: np.ndarray, wt: np.ndarray, var: np.ndarray, prior: float,
+             seed: int) -> float:
+    """The share of a paired Poisson bootstrap over the map's blocks in which the second pose
+    is not more photo-consistent than the first (``wt``, ``var``: (2, N) per-point weights and
+    variances, :func:`~paretocal.objective.photo.photo_cost`)."""
+    from .objective.photo import UNSEEN_COST
+
+    _, block = np.unique(np.floor(xyz / PHOTO_BLOCK_M).astype(np.int64), axis=0,
+                         return_inverse=True)
+    block = block.ravel()
+    nb = int(block.max()) + 1
+    num = np.array([np.bincount(block, wt[i] * var[i], nb) for i in range(2)])   # (2, B)
+    den = np.array([np.bincount(block, wt[i], nb) for i in range(2)])
+    w = np.random.default_rng(seed).poisson(1.0, (PHOTO_RESAMPLES, nb)).astype(np.float64)
+    cost = (w @ num.T + prior * UNSEEN_COST) / (w @ den.T + prior)             # (R, 2)
+    return float(np.mean(cost[:, 1] >= cost[:, 0]))
+
+
 def _search_axes(mr) -> np.ndarray:
     """(3, 3) rotation axes (rows, camera frame) of the search's three angles: the motion's
     free axis first (the mean direction of travel; the optical axis when every angle is
@@ -478,4 +568,4 @@ def _search_axes(mr) -> np.ndarray:
 
 
 __all__ = ["AFTER_DEG", "AFTER_M", "WIDE_DEG", "WIDE_M", "WideStart", "after_settings",
-           "baseline_m", "camera_pairs", "wanted", "wide_start"]
+           "baseline_m", "camera_pairs", "photo_check", "wanted", "wide_start"]

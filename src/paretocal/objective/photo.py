@@ -228,7 +228,8 @@ def _cost_from_sums(S1, S2, N, W, tau):
     cost = ((wt * var).sum(axis=1) + w0 * UNSEEN_COST) / (wt.sum(axis=1) + w0)
     return {"cost": cost, "coverage": seen.mean(axis=1),
             "variance_seen": np.where(seen, var, 0.0).sum(axis=1)
-            / np.maximum(seen.sum(axis=1), 1)}
+            / np.maximum(seen.sum(axis=1), 1),
+            "point_weight": wt, "point_variance": np.where(seen, var, 0.0), "prior": w0}
 
 
 def _sample(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -371,7 +372,10 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
         frames of the variance of the normalised intensities across those frames, shrunk
         towards :data:`UNSEEN_COST` (lower is better; :func:`_cost_from_sums`);
         ``coverage`` (C,): the share of points seen by at least two frames;
-        ``variance_seen`` (C,): the unweighted mean variance over those points.
+        ``variance_seen`` (C,): the unweighted mean variance over those points;
+        ``point_weight``, ``point_variance`` (C, N): each map point's weight and variance (0
+        where fewer than two frames see it) and ``prior``, the shrinkage's weight, so that
+        ``cost = (sum(weight * variance) + prior * UNSEEN_COST) / (sum(weight) + prior)``.
     """
     if not HAVE_NUMBA:  # pragma: no cover
         return photo_cost_numpy(scene, T)
