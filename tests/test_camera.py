@@ -201,6 +201,14 @@ class TestLensModels:
         ray = cam.unproject(folded[None])[0]
         assert np.isfinite(ray).all() and math.degrees(math.acos(ray[2])) < 106
 
+    @pytest.mark.parametrize("tiny", [5e-324, 1e-300, -1e-300])
+    def test_a_vanishing_coefficient_never_folds(self, tiny):
+        """A subnormal or tiny highest coefficient puts the fold-back at infinity, with no
+        floating-point warning (found by tests/test_fuzz.py)."""
+        K = np.array([[700.0, 0, 600], [0, 700.0, 180], [0, 0, 1]])
+        assert Camera(K, 1242, 375, "pinhole", (0.0, 0.0, 0.0, 0.0, tiny)).r_limit > 1e40
+        assert Camera(K, 1242, 375, "fisheye", (0.0, 0.0, 0.0, tiny)).r_limit > 1.0
+
     def test_radtan_and_fisheye_fold_back_are_invalid(self):
         K = np.array([[500.0, 0, 500], [0, 500, 500], [0, 0, 1]])
         cam = Camera(K, 1000, 1000, "pinhole", [-0.4, 0.0, 0.0, 0.0])

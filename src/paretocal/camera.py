@@ -495,9 +495,13 @@ def _smallest_positive_root(coeffs: np.ndarray) -> float:
     if len(c) < 2:
         return np.inf
     try:
-        roots = npoly.polyroots(c)
+        # A subnormal leading coefficient (e.g. D = [0, 0, 0, 0, 5e-324]) overflows the
+        # companion matrix; its roots lie at infinity, which is what is meant.
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            roots = npoly.polyroots(c)
     except np.linalg.LinAlgError:  # pragma: no cover - only for degenerate coefficient sets
         return np.inf
+    roots = roots[np.isfinite(roots)]
     real = roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1.0, np.abs(roots))].real
     real = real[real > 0]
     return float(real.min()) if len(real) else np.inf
