@@ -81,6 +81,9 @@ MIN_BAND_DEG = 1.5
 #: Differential evolution in each slice: population per dimension and generations.
 DE_POPSIZE = 10
 DE_GENERATIONS = 40
+#: scipy's relative convergence tolerance of a slice's differential evolution (0: every
+#: slice runs all its generations).
+DE_TOL = 0.0
 #: Slices whose best pose is polished in six degrees of freedom.
 POLISHED = 5
 #: Rounds of the search at most: each from the pose the last one kept, until two agree
@@ -426,7 +429,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                   (-half[1], half[1]), (dz - step / 2, dz + step / 2)]
         res = differential_evolution(fun, bounds, popsize=DE_POPSIZE, maxiter=DE_GENERATIONS,
                                      vectorized=True, updating="deferred", polish=False,
-                                     tol=0.0, seed=s.seed + k)
+                                     tol=DE_TOL, seed=s.seed + k)
         best.append((float(res.fun), res.x))
         if progress is not None:
             progress(k + 1, len(depths))
