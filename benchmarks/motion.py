@@ -5,7 +5,7 @@
 
 Reads the aiMotive clouds (``$PARETOCAL_DATA/aimotive/points/*.pcd``, default ../shared/data
 beside the project; 100 ms Hesai Pandar64 revolutions with per-point times, not
-motion-compensated) and runs :func:`paretocal.motion.estimate_motion` on them. It prints, per
+motion-compensated) and runs :func:`paretocal.lidar.motion.estimate_motion` on them. It prints, per
 consecutive pair: the velocity and yaw rate from the registration, the standard error of the
 forward speed from the registration's own information matrix, the share of the translation
 constraint along x, y and z, the smallest eigenvalue of the translation information with its
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from paretocal.io.readers import read_cloud
-from paretocal.motion import estimate_motion
+from paretocal.lidar.motion import estimate_motion
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))

@@ -7,7 +7,7 @@ the rig variants of :mod:`paretocal.testing` (32 and 16 beams, firing order, shu
 vehicle frame with the sensor 1.5 m from the origin and tilted). For each the rings are
 recovered as ``paretocal calibrate`` does without a ring field (``auto``): for the vehicle frame
 the LiDAR's pose is first estimated from the sweep
-(:func:`paretocal.features.sensor.estimate_sensor_pose`), as when ``calib.yaml`` has no
+(:func:`paretocal.lidar.sensor.estimate_sensor_pose`), as when ``calib.yaml`` has no
 ``lidar_pose``. Printed per variant: the share of points on their true ring (min and median over
 the frames), the rings found, the method used, and the time per sweep. ``--json`` writes the
 figures as JSON (to FILE, or alone to standard output without one, the table then on stderr).
@@ -27,8 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from paretocal import testing as T  # noqa: E402
-from paretocal.features.rings import recover_rings  # noqa: E402
-from paretocal.features.sensor import estimate_sensor_pose  # noqa: E402
+from paretocal.lidar.rings import recover_rings  # noqa: E402
+from paretocal.lidar.sensor import estimate_sensor_pose  # noqa: E402
 from paretocal.io.layouts import load_frames  # noqa: E402
 
 VARIANTS = {

@@ -404,7 +404,7 @@ def scaling(frames, settings, png=None, quick=False):
 def features(frames, settings):
     """Section 4: feature extraction per frame."""
     from paretocal.features import image_features, lidar_features, prepare_frame
-    from paretocal.features.rings import recover_rings
+    from paretocal.lidar.rings import recover_rings
 
     f = frames[0]
     s = settings

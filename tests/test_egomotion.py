@@ -20,7 +20,7 @@ from paretocal.egomotion import (
     pose_from_rays,
     rotation_angle_deg,
 )
-from paretocal.motion import register_pair
+from paretocal.lidar.registration import register_pair
 
 from .conftest import data_dir
 from .test_motion import HEIGHT, _box_hits, _pole_hits, street_scene

@@ -5,8 +5,9 @@ from scipy.spatial import cKDTree
 from paretocal.camera import project
 from paretocal.config import Settings
 from paretocal.features import (DEPTH_EDGE, INTENSITY_EDGE, SMOOTH, image_features,
-                                lidar_features, prepare_frame, recover_rings, stratified_order)
-from paretocal.features.rings import elevation_deg, rings_from_elevation, rings_from_scan_order
+                                lidar_features, prepare_frame, stratified_order)
+from paretocal.lidar.rings import (elevation_deg, recover_rings, rings_from_elevation,
+                                   rings_from_scan_order)
 
 from .helpers import box_scene
 

@@ -7,7 +7,7 @@ states which returns must (or must not) become edges.
 import numpy as np
 
 from paretocal.features.lidar import DEPTH_EDGE, lidar_features
-from paretocal.features.rings import Rings, _as_rings
+from paretocal.lidar.rings import Rings, _as_rings
 
 #: Uneven elevations like a modern 64-beam head: dense near the horizon, 1 deg apart below.
 UNEVEN = np.r_[np.arange(2.0, -6.0, -0.2), np.arange(-6.0, -25.5, -1.0)]

@@ -1,4 +1,4 @@
-"""Ego-motion estimation and de-skewing (paretocal.motion).
+"""Ego-motion estimation and de-skewing (paretocal.lidar).
 
 Synthetic oracles: a simulated spinning LiDAR (32 beams, one revolution per 100 ms, clockwise,
 sweeps 133 ms apart like the aiMotive subset) moving with a known constant twist through a scene
@@ -16,7 +16,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from paretocal.io.readers import read_cloud
-from paretocal.motion import (
+from paretocal.lidar import (
     PoseTrajectory,
     Twist,
     deskew,
@@ -294,7 +294,7 @@ def test_estimate_motion_per_frame_and_initial(street):
 def test_corridor_is_reported_unobservable_along_x(caplog):
     """Walls parallel to the motion and a flat floor do not fix the motion along x."""
     clouds = [(x, t) for x, t, _ in sequence(corridor_scene(), Twist([15.0, 0, 0]), 4)]
-    with caplog.at_level(logging.WARNING, logger="paretocal.motion"):
+    with caplog.at_level(logging.WARNING, logger="paretocal.lidar.motion"):
         est = estimate_motion(clouds, seed=0, residual_sample=0)
     assert not est.observable[0]
     assert est.observable[1] and est.observable[2]

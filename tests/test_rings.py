@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from paretocal.features.prepare import sensor_points
-from paretocal.features.rings import MIN_PURITY, recover_rings, ring_purity
+from paretocal.lidar.rings import MIN_PURITY, recover_rings, ring_purity
 from paretocal.testing import (decimate, firing_order, kitti_truth, ring_accuracy, shuffled,
                                to_vehicle_frame)
 
@@ -115,7 +115,7 @@ def test_a_model_that_does_not_fit_is_replaced(sweeps):
 def test_group_sigma_is_each_labels_own_sigma(rng):
     """The grouped robust scatter equals the one-label formula on every label (odd and even
     counts, a label with one point, labels without points)."""
-    from paretocal.features.rings import _group_sigma, _sigma
+    from paretocal.lidar.rings import _group_sigma, _sigma
 
     lab = np.concatenate([rng.integers(0, 9, 5000), [11]])
     r = np.abs(rng.normal(size=len(lab)))
@@ -130,7 +130,7 @@ def test_group_sigma_is_each_labels_own_sigma(rng):
 def test_compiled_ring_line_sums_are_numpys(rng):
     """The per-ring passes of fit_ring_lines are compiled loops in point order: the same sums,
     ranges and median residuals as np.bincount, ufunc.at and np.median, bit for bit."""
-    from paretocal.features.rings import _group_lines, _group_sigma
+    from paretocal.lidar.rings import _group_lines, _group_sigma
 
     n = 40
     lab = rng.integers(0, n - 3, 5000)                      # the last labels stay empty

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from paretocal.features.rings import MIN_PURITY, recover_rings
+from paretocal.lidar.rings import MIN_PURITY, recover_rings
 from paretocal.geometry import invert, transform_points
 from paretocal.testing import ring_accuracy
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from paretocal.config import Settings
-from paretocal.features.rings import MIN_PURITY, MIN_RINGS, recover_rings
-from paretocal.features.sensor import estimate_sensor_pose
+from paretocal.lidar.rings import MIN_PURITY, MIN_RINGS, recover_rings
+from paretocal.lidar.sensor import estimate_sensor_pose
 from paretocal.pipeline import locate_lidar
 from paretocal.testing import decimate, firing_order, kitti_truth, ring_accuracy, \
     to_vehicle_frame, vehicle_pose
@@ -112,7 +112,7 @@ def test_an_unlucky_subsample_is_retried(raw_frames, seed):
 
 
 def test_a_pose_that_cannot_be_found_is_said(raw_frames, sweep, monkeypatch, caplog):
-    import paretocal.features.sensor as sensor
+    import paretocal.lidar.sensor as sensor
     from paretocal.pipeline import warn_unlocated
 
     w = to_vehicle_frame(sweep)

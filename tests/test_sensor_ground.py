@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from paretocal.features.rings import MIN_PURITY, recover_rings
-from paretocal.features.sensor import GROUND_TOL_M, estimate_sensor_pose, ground_plane
+from paretocal.lidar.rings import MIN_PURITY, recover_rings
+from paretocal.lidar.sensor import GROUND_TOL_M, estimate_sensor_pose, ground_plane
 
 #: PandaSet's Pandar64 in the cloud's frame L, as its README gives it (the reference).
 README_POSE = np.array([[-0.99949, 0.03179, -0.00003, 0.00016],

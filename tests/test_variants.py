@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from paretocal.features.rings import MIN_PURITY, azimuth, recover_rings
+from paretocal.lidar.rings import MIN_PURITY, azimuth, recover_rings
 from paretocal.geometry import invert, transform_points
 from paretocal.testing import (decimate, kitti_truth, packet_order, recovered_truth,
                                ring_accuracy, shuffled, to_vehicle_frame)

@@ -23,13 +23,13 @@ Conventions
 
 LiDAR odometry
 --------------
-Two registrations are available. ``"own"`` is :func:`paretocal.motion.register_pair` (the robust
-point-to-plane ICP of :mod:`paretocal.motion`), scan to scan, each pair started from the
+Two registrations are available. ``"own"`` is :func:`paretocal.lidar.registration.register_pair` (the robust
+point-to-plane ICP of :mod:`paretocal.lidar.registration`), scan to scan, each pair started from the
 previous pair's motion. ``"kiss-icp"`` is the optional KISS-ICP package (scan to local map,
 constant-velocity prediction, adaptive threshold); only its poses are used, never its de-skew
 (it ends at the sweep's end, not the image time). For both, each pair's covariance is evaluated
 by the own registration at the pair's pose: the cluster-robust sandwich over 4 m blocks of
-correspondences (:class:`paretocal.motion.PairRegistration`).
+correspondences (:class:`paretocal.lidar.registration.PairRegistration`).
 
 Measured (``benchmarks/egomotion.py``, 2 shared cores): the own registration is the default.
 On the KITTI drive its pair translations run smoothly from 0.236 to 0.196 m per 0.1 s while
@@ -73,7 +73,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .camera import Camera
-from .motion import register_pair
+from .lidar.registration import register_pair
 
 log = logging.getLogger(__name__)
 
@@ -263,7 +263,7 @@ def lidar_odometry(clouds: Sequence[np.ndarray], *, method: str = "auto",  # noq
         Rigid sweeps in time order (de-skewed already when the sensor moved during them), each
         in its own cloud frame, metres. Extra columns (intensity) are ignored.
     method : {"auto", "own", "kiss-icp"}
-        ``"own"``: :func:`paretocal.motion.register_pair`, scan to scan. ``"kiss-icp"``: the
+        ``"own"``: :func:`paretocal.lidar.registration.register_pair`, scan to scan. ``"kiss-icp"``: the
         optional KISS-ICP package; when it is missing the own registration is used and
         :attr:`LidarOdometry.note` (and the log) say why. ``"auto"``: the default, ``"own"``.
     points : int

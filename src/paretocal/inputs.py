@@ -12,7 +12,7 @@ import numpy as np
 from .config import Settings
 from .errors import InputError
 from .features.prepare import frame_rings, view_mask
-from .features.rings import MIN_PURITY, MIN_RINGS, Rings
+from .lidar.rings import MIN_PURITY, MIN_RINGS, Rings
 from .geometry import invert
 from .io.frame import Frame
 
@@ -41,7 +41,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
 
     A spinning LiDAR on a moving vehicle stores each point at its own time (a 10 Hz sweep at
     30 m/s spans 3 m); the image is exposed at one time. When every cloud has per-point time,
-    the twist is estimated by registering consecutive sweeps (:func:`paretocal.motion.
+    the twist is estimated by registering consecutive sweeps (:func:`paretocal.lidar.motion.
     estimate_motion`) and each sweep is expressed at its centre time plus
     ``settings.motion.time_offset_s``. The motion is applied only when the registration
     constrains it along every axis; otherwise the sweeps stay as recorded and the returned
@@ -57,7 +57,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     """
     import dataclasses
 
-    from . import motion as mo
+    from .lidar import deskew as dk, motion as mo
 
     m = settings.motion
     if m.deskew == "off":
@@ -96,8 +96,8 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     shift = 0.0
     for j, k in enumerate(order):
         f = frames[k]
-        t_ref = mo.sweep_centre(f.time) + m.time_offset_s
-        xyz = mo.deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
+        t_ref = dk.sweep_centre(f.time) + m.time_offset_s
+        xyz = dk.deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
         shift = max(shift, float(np.max(np.linalg.norm(xyz - f.points[:, :3], axis=1))))
         pts = f.points.copy()
         pts[:, :3] = xyz
@@ -127,7 +127,7 @@ def locate_lidar(frames: list[Frame],
     (``lidar_pose``) is used as given; a cloud with a ring field, or whose rings fit the line
     model about its own origin, needs none. Otherwise (a cloud stored in a vehicle frame) the
     pose is estimated from the first sweep
-    (:func:`~paretocal.features.sensor.estimate_sensor_pose`) and, when the rings fit the line
+    (:func:`~paretocal.lidar.sensor.estimate_sensor_pose`) and, when the rings fit the line
     model in the estimated frame, given to every frame (one rig, one mount).
 
     Returns
@@ -143,7 +143,7 @@ def locate_lidar(frames: list[Frame],
     """
     import dataclasses
 
-    from .features.sensor import estimate_sensor_pose
+    from .lidar.sensor import estimate_sensor_pose
 
     if any(f.sensor_pose is not None for f in frames):
         return frames, {"source": "calib.yaml"}, None
@@ -210,7 +210,7 @@ def warn_rings(frames: list[Frame], rings: list[Rings]) -> None:
     """One warning per ring problem (not per frame), naming a file and what to do.
 
     Rings that do not fit the line model (purity below
-    :data:`~paretocal.features.rings.MIN_PURITY`) are still used, but a wrong ring structure
+    :data:`~paretocal.lidar.rings.MIN_PURITY`) are still used, but a wrong ring structure
     makes depth edges noise. Called once the scene is known to be usable, so that a bad-input
     error is the only line the user sees.
     """

@@ -14,7 +14,7 @@ from .config import ObjectiveSettings, SearchSettings, Settings
 from .errors import DegenerateSceneError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
-from .features.rings import Rings
+from .lidar.rings import Rings
 from .inputs import joint_camera
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
@@ -359,7 +359,7 @@ def depth_edges_doubtful(rings: dict | None) -> str | None:
     """Why a frame's depth edges are likely noise, or None: they are the near sides of range
     jumps between neighbours on a ring, so rings that are not the lasers' (too few, or points
     off their ring's cone: purity below MIN_PURITY) make neighbours of returns that are not."""
-    from .features.rings import MIN_PURITY, MIN_RINGS
+    from .lidar.rings import MIN_PURITY, MIN_RINGS
 
     if not rings:
         return None

@@ -1,7 +1,7 @@
 """Rig variants of a real sweep, for tests and benchmarks (nothing is stored: made at run time).
 
 A KITTI HDL-64E sweep in KITTI's storage order carries its exact ring index (one laser after
-another, :func:`~paretocal.features.rings.rings_from_scan_order`). From it this module makes
+another, :func:`~paretocal.lidar.rings.rings_from_scan_order`). From it this module makes
 clouds as other rigs record them, each with its exact truth:
 
 * fewer beams (every 2nd or 4th ring by elevation: 32 and 16 beams, 0.8 / 1.7 deg apart);
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .features.rings import (MIN_PURITY, MIN_RINGS, azimuth, fit_ring_lines, recover_rings,
+from .lidar.rings import (MIN_PURITY, MIN_RINGS, azimuth, fit_ring_lines, recover_rings,
                              ring_order, rings_from_scan_order)
 from .geometry import invert, rotation_zyx, transform_points
 
@@ -191,7 +191,7 @@ def recovered_truth(points: np.ndarray, sensor_pose: np.ndarray,
                     time: np.ndarray | None = None,
                     view: np.ndarray | None = None) -> Variant:
     """A sweep without a ring field (PandaSet's Pandar64) with rings recovered by the
-    project's own :func:`~paretocal.features.rings.recover_rings` in the sensor's frame, as
+    project's own :func:`~paretocal.lidar.rings.recover_rings` in the sensor's frame, as
     the truth its variants are compared with.
 
     The truth is the recovery's, not the sensor's: it is only as right as the line model's
@@ -228,8 +228,8 @@ def recovered_truth(points: np.ndarray, sensor_pose: np.ndarray,
     ------
     ValueError
         When the recovered rings are not plausible (fewer than
-        :data:`~paretocal.features.rings.MIN_RINGS` rings or purity below
-        :data:`~paretocal.features.rings.MIN_PURITY`).
+        :data:`~paretocal.lidar.rings.MIN_RINGS` rings or purity below
+        :data:`~paretocal.lidar.rings.MIN_PURITY`).
     """
     pts = np.asarray(points, dtype=np.float32)
     P = np.asarray(sensor_pose, dtype=np.float64)

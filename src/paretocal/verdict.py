@@ -37,7 +37,7 @@ import numpy as np
 from .config import DecisionSettings, SearchSettings
 from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
-from .features.rings import MIN_PURITY
+from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
 from .quality import (AXES, TO_REPORT, at_every_point, axis_resolution, displacement_px,
                       local_optimum, pixel_fd_step, quality_report)

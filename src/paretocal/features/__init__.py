@@ -3,8 +3,7 @@
 from .image import ImageFeatures, distance_transform, edge_map, image_features
 from .lidar import DEPTH_EDGE, GROUP_NAMES, INTENSITY_EDGE, SMOOTH, LidarFeatures, lidar_features
 from .prepare import FrameFeatures, prepare_frame, stratified_order
-from .rings import recover_rings
 
 __all__ = ["DEPTH_EDGE", "GROUP_NAMES", "INTENSITY_EDGE", "SMOOTH", "FrameFeatures",
            "ImageFeatures", "LidarFeatures", "distance_transform", "edge_map", "image_features",
-           "lidar_features", "prepare_frame", "recover_rings", "stratified_order"]
+           "lidar_features", "prepare_frame", "stratified_order"]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rings import Rings, azimuth, recover_rings
+from ..lidar.rings import Rings, azimuth, recover_rings
 
 DEPTH_EDGE, INTENSITY_EDGE, SMOOTH = 0, 1, 2
 GROUP_NAMES = ("depth_edge", "intensity_edge", "smooth")
@@ -192,11 +192,11 @@ def lidar_features(  # noqa: PLR0913 - keyword-only options, each documented
         whole sweep before cropping it); recovered with ``ring_method`` otherwise.
     ring_spacing_deg : float, optional
         The sensor's median elevation gap between neighbouring rings; taken from ``ring`` when
-        it is a :class:`~paretocal.features.rings.Rings`. Used when ``ring_elevation_deg`` is
+        it is a :class:`~paretocal.lidar.rings.Rings`. Used when ``ring_elevation_deg`` is
         not known.
     ring_elevation_deg : ndarray, shape (R,), optional
         Far-field elevation of each ring id (deg); taken from ``ring`` when it is a
-        :class:`~paretocal.features.rings.Rings`.
+        :class:`~paretocal.lidar.rings.Rings`.
     time : ndarray, shape (N,), optional
         Per-point time (s). Returns recorded more than half a sweep apart are not neighbours
         (:data:`MAX_NEIGHBOUR_DT_SWEEPS`): at the seam where a sweep starts and ends, the two

@@ -19,7 +19,7 @@ from ..geometry import invert, transform_points
 from ..io.frame import Frame
 from .image import ImageFeatures, image_features
 from .lidar import GROUP_NAMES, LidarFeatures, lidar_features
-from .rings import Rings, recover_rings
+from ..lidar.rings import Rings, recover_rings
 
 CROP_EXTRA_PX = 150.0
 #: Points projected at a time when a sweep is cropped to the view: the projection's float64
@@ -120,7 +120,7 @@ def frame_rings(frame: Frame, features: FeatureSettings,
                 rng: np.random.Generator | int | None = 0, model: Rings | None = None,
                 view: np.ndarray | None = None) -> Rings:
     """The rings of a frame's sweep: the file's ring field when plausible, else recovered
-    (see :func:`~paretocal.features.rings.recover_rings`; ``model``, an earlier sweep's rings
+    (see :func:`~paretocal.lidar.rings.recover_rings`; ``model``, an earlier sweep's rings
     of the same sensor, makes the recovery of an unordered sweep several times cheaper;
     ``view``, the returns features are taken from (:func:`view_mask`), is where the rings
     are judged)."""

@@ -44,7 +44,7 @@ class Frame:
     sensor_pose : ndarray, shape (4, 4), or None
         Pose of the LiDAR sensor in the cloud's frame (cloud <- sensor), when the points are
         stored in another frame (a vehicle frame); None when the cloud's origin is the sensor
-        or the pose is unknown (see :mod:`paretocal.features.rings`).
+        or the pose is unknown (see :mod:`paretocal.lidar.rings`).
     mask : ndarray, shape (H, W), bool, or None
         Pixels that show the scene (True); False on the ego vehicle, black borders or lens
         areas the calibration must ignore (calib.yaml's ``camera.mask``, and the pixels the

@@ -167,7 +167,7 @@ class SensorPoseEstimate:
         ``h_k`` of the fitted lines (m).
     ok : bool
         The estimate explains the sweep (:data:`MIN_EXPLAINED`, and at least
-        :data:`~paretocal.features.rings.MIN_RINGS` lines); when False, ``notes`` says why
+        :data:`~paretocal.lidar.rings.MIN_RINGS` lines); when False, ``notes`` says why
         and the pose should not be used.
     notes : list of str
     """

@@ -30,7 +30,7 @@ points within tolerance of their ring's line, and 0 for a ring set that cannot b
 multi-beam LiDAR's (fewer than :data:`MIN_RINGS` rings, or "rings" that scatter across the gaps
 between them); ``Rings.notes`` say when a result is not plausible. The geometry is taken about
 the sensor origin: clouds stored in another frame must be brought into the sensor frame first
-(see :mod:`paretocal.features.sensor`); about a wrong origin the returns scatter off their
+(see :mod:`paretocal.lidar.sensor`); about a wrong origin the returns scatter off their
 lines and the result is not plausible.
 
 The rings of one sensor keep their lines from sweep to sweep: ``recover_rings(..., model=r)``
