@@ -138,7 +138,7 @@ class DecisionSettings:
 
 @dataclass(frozen=True)
 class MotionSettings:
-    """De-skewing clouds recorded while moving (see :mod:`paretocal.lidar.deskew`)."""
+    """De-skewing clouds recorded while moving (see :mod:`paretocal.lidar.trajectory`)."""
 
     deskew: str = "auto"             #: "auto": when every cloud has per-point time; "off"
     time_offset_s: float = 0.0       #: image time minus the sweep's centre time (s)

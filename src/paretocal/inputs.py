@@ -57,7 +57,8 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     """
     import dataclasses
 
-    from .lidar import deskew as dk, motion as mo
+    from .lidar.motion import estimate_motion
+    from .lidar.trajectory import deskew, sweep_centre
 
     m = settings.motion
     if m.deskew == "off":
@@ -73,7 +74,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), frames[k].time)
               for k in order]
     try:
-        est = mo.estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
+        est = estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
                                  seed=settings.search.seed)
     except ValueError as exc:
         return frames, {"compensated": False, "reason": f"ego-motion estimate failed: {exc}"}
@@ -96,8 +97,8 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     shift = 0.0
     for j, k in enumerate(order):
         f = frames[k]
-        t_ref = dk.sweep_centre(f.time) + m.time_offset_s
-        xyz = dk.deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
+        t_ref = sweep_centre(f.time) + m.time_offset_s
+        xyz = deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
         shift = max(shift, float(np.max(np.linalg.norm(xyz - f.points[:, :3], axis=1))))
         pts = f.points.copy()
         pts[:, :3] = xyz

@@ -4,7 +4,7 @@
   recovered from the geometry (the line model of each laser's cone), with their purity;
 * :mod:`~paretocal.lidar.sensor`: the sensor's pose in the cloud's frame (a vehicle frame),
   from the rings and the ground;
-* :mod:`~paretocal.lidar.deskew`: the motions a sweep can be de-skewed with (a constant twist,
+* :mod:`~paretocal.lidar.trajectory`: the motions a sweep can be de-skewed with (a constant twist,
   a pose trajectory), the SE(3) algebra they use, and de-skewing to one time;
 * :mod:`~paretocal.lidar.registration`: one rigid cloud registered onto another (robust
   point-to-plane ICP) with the information and covariance of the solution;
@@ -15,7 +15,7 @@ Pure functions over arrays: nothing here reads a file or draws. The pipeline's L
 (:func:`paretocal.inputs.prepare_lidar`) call them in this order: sensor pose, rings, motion.
 """
 
-from .deskew import Motion, PoseTrajectory, Twist, deskew, sweep_centre
+from .trajectory import Motion, PoseTrajectory, Twist, deskew, sweep_centre
 from .motion import (MotionEstimate, TimeOffsetEstimate, estimate_motion, estimate_time_offset,
                      pair_residuals)
 from .registration import PairRegistration, register_pair

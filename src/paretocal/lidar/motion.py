@@ -1,6 +1,6 @@
 """Ego-motion from a sequence of LiDAR sweeps (and the time offset of their clocks).
 
-Each sweep is de-skewed (:mod:`paretocal.lidar.deskew`, whose conventions hold here) with the
+Each sweep is de-skewed (:mod:`paretocal.lidar.trajectory`, whose conventions hold here) with the
 current estimate and registered onto the next (:mod:`paretocal.lidar.registration`).
 
 Estimating the motion
@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import transform_points
-from .deskew import Motion, Twist, check_cloud, deskew, se3_log, sweep_centre
+from .trajectory import Motion, Twist, check_cloud, deskew, se3_log, sweep_centre
 from .registration import (PairFit, coarse_translation, conditioning, kd_tree, neighbours,
                            plane_target, prepare_levels, register_levels)
 

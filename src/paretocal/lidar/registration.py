@@ -30,7 +30,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from ..geometry import transform_points
-from .deskew import cross_rows, se3_exp, se3_matrix
+from .trajectory import cross_rows, se3_exp, se3_matrix
 
 __all__ = ["PairFit", "PairRegistration", "PlaneTarget", "coarse_translation", "conditioning",
            "kd_tree", "neighbours", "plane_target", "prepare_levels", "register_levels",

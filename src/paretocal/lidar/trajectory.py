@@ -1,4 +1,5 @@
-"""De-skewing a sweep to one time, the motions it takes, and the SE(3) algebra they use.
+"""The motions of a LiDAR frame (a twist, a pose trajectory), their SE(3) algebra, and
+de-skewing a sweep to one time.
 
 A spinning LiDAR that moves while it turns stores each point in the sensor (or vehicle) frame
 *at the time the point was measured*. A camera image is exposed at one time. Before a cloud is
@@ -30,8 +31,8 @@ Clouds without per-point times (KITTI ``.bin`` sweeps, for example) cannot be de
 caller checks for a time column and skips de-skewing when there is none; these functions
 raise ``ValueError`` on missing or non-finite times.
 
-:mod:`paretocal.lidar.motion` estimates the motion from the sweeps; :mod:`paretocal.lidar.registration`
-registers one rigid cloud onto another.
+:mod:`paretocal.lidar.motion` estimates the motion from the sweeps;
+:mod:`paretocal.lidar.registration` registers one rigid cloud onto another.
 """
 
 from __future__ import annotations
