@@ -703,12 +703,21 @@ class TestInitFormats:
             read_extrinsic(tmp_path / "kitti" / KITTI_FILE)
         np.testing.assert_allclose(read_extrinsic(tmp_path / "extrinsic.yaml"), T_est, atol=1e-9)
 
-    def test_kittis_own_file_through_the_command_line(self, tmp_path, raw_date, raw_frames,
-                                                      capsys):
-        from paretocal.cli import read_init
+    def test_kittis_own_file_as_a_start(self, tmp_path, raw_date, raw_frames):
+        """The library reads an --init file as the command line does: KITTI's own
+        calib_velo_to_cam.txt through the source's rectification; refused, naming the file,
+        for a source that is not KITTI."""
+        from paretocal import read_init
 
         T = read_init(raw_date / "calib_velo_to_cam.txt", raw_date, 2)
         np.testing.assert_allclose(T, raw_frames[0].T_ref, atol=1e-7)
+        # From the loaded frames (as paretocal batch reads a manifest entry's init).
+        T = read_init(raw_date / "calib_velo_to_cam.txt", raw_frames)
+        np.testing.assert_allclose(T, raw_frames[0].T_ref, atol=1e-7)
+        other = tmp_path / "other"
+        other.mkdir()
+        with pytest.raises(InputError, match="calib_velo_to_cam.txt: holds KITTI's Tr_velo"):
+            read_init(raw_date / "calib_velo_to_cam.txt", SimpleNamespace(frames=[], root=other))
 
     def test_translation_and_quaternion(self, tmp_path, T_est):
         from scipy.spatial.transform import Rotation

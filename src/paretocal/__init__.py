@@ -29,7 +29,7 @@ degrees.
 _LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "config",
          "depth_map": "depth", "write_depth": "depth", "ParetocalError": "errors",
          "extract_bag": "extract",
-         "load_frames": "io", "read_extrinsic": "io", "write_extrinsic": "io",
+         "load_frames": "io", "read_extrinsic": "io", "read_init": "io", "write_extrinsic": "io",
          "write_run": "report.results", "CalibrationResult": "pipeline",
          "calibrate": "pipeline", "calibrate_run": "rundir", "resume_run": "rundir",
          "StudyPlan": "study", "run_study": "study"}
@@ -59,6 +59,6 @@ def __dir__():
 
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
-           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "extract_bag", "load_frames",
-           "load_settings",
-           "read_extrinsic", "resume_run", "run_study", "write_depth", "write_extrinsic", "write_run"]
+           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "extract_bag",
+           "load_frames", "load_settings", "read_extrinsic", "read_init", "resume_run",
+           "run_study", "write_depth", "write_extrinsic", "write_run"]

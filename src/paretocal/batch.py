@@ -390,14 +390,14 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
     from .check import check_extrinsic
     from .config import settings_from_mapping
     from .geometry import pose_error
-    from .io import load_frames, read_extrinsic
+    from .io import load_frames, read_init
     from .pipeline import calibrate
     from .rundir import publish_run, run_record
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
-    T_init = read_extrinsic(entry.init) if entry.init else None
+    T_init = read_init(entry.init, frames) if entry.init else None
     result = calibrate(frames, T_init, settings)
     # Staged and published with result.json last: the folder never mixes two runs, and its
     # run_args.json is always the run's own.

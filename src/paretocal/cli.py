@@ -153,46 +153,6 @@ def _phases() -> dict:
     return PHASES
 
 
-def read_init(path: Path, source, camera: int | None):
-    """The extrinsic file ``path`` as ``T_cam_lidar``; a KITTI ``calib_velo_to_cam.txt`` is
-    taken through the rectification of ``source`` (a folder, or a source already detected;
-    it must then be a KITTI source)."""
-    from .io import detect_source, read_extrinsic
-    from .io.exports import kitti_rect_of
-    from .io.extrinsic import needs_kitti_rect
-
-    rect = None
-    if needs_kitti_rect(path):
-        found = (source if hasattr(source, "frames")
-                 else detect_source(source, 2 if camera is None else camera))
-        rect = kitti_rect_of(found.frames)
-        if rect is None:
-            where = getattr(source, "root", source)
-            raise ParetocalError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
-                                 f"camera 0) but {where} is not a KITTI source; give "
-                                 "T_cam_lidar instead")
-    return read_extrinsic(path, kitti_rect=rect)
-
-
-def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
-    """``"DEG,M"`` (or a two-item list) -> (deg, m); (None, None) for None."""
-    import math
-
-    if text is None:
-        return None, None
-    items = text if isinstance(text, (list, tuple)) else str(text).replace(" ", "").split(",")
-    try:
-        deg, m = (float(v) for v in items)
-        ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise SettingsError(f"{where} {text!r}: expected DEG,M, two positive numbers (the "
-                            "rotation in degrees and the translation in metres per axis, "
-                            "e.g. 5,0.2)")
-    return deg, m
-
-
 def _fmt_err(e: dict | None) -> str:
     if not e:
         return "n/a"
@@ -293,6 +253,7 @@ def calibrate(
     settings = load_settings(config)
     if budget_ms is not None and rule is None:
         rule = Rule.budget
+    from .config import parse_init_error
     err_deg, err_m = parse_init_error(init_error, "--init-error")
     settings = settings.replace(
         search={"pop": pop, "gens": gens, "seed": seed, "n_min": n_min, "n_max": n_max,
@@ -326,6 +287,7 @@ def calibrate(
     # Detected once: its warnings are said once.
     detected = detect_source(Path(source), settings.camera)
     _check_run_out(out, force)
+    from .io import read_init
     T_init = read_init(init, detected, settings.camera) if init is not None else None
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
@@ -388,6 +350,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     for name in [JOINT_RUN] if joint else [camera] if camera is not None else names:
         _check_run_out(out / name, force)
     first = names[0] if joint else camera
+    from .io import read_init
     T_inits = {first: read_init(init, source, None)} if init is not None else None
     unreliable = []
 
@@ -589,6 +552,7 @@ def check(
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
+    from .io import read_init
     T = read_init(extrinsic, source, camera) if extrinsic is not None else None
     loaded = load_frames(source, frames, camera)
     if T is None:
@@ -674,6 +638,7 @@ def study(
     settings = load_settings(config).replace(search={"seed": seed})
     settings = dataclasses.replace(settings, camera=camera if camera is not None
                                    else settings.camera)
+    from .io import read_init
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
     with _Progress(quiet) as progress:
@@ -710,6 +675,7 @@ def depth(
         raise SettingsError("--max-depth must be positive")
     check_output_dir(out)
     loaded = load_frames(source, frames, camera)
+    from .io import read_init
     T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")

@@ -72,6 +72,40 @@ def needs_kitti_rect(path: str | Path) -> bool:
     return text is not None and "T_cam_lidar itself" not in text
 
 
+
+def read_init(path: str | Path, source, camera: int | None = None) -> np.ndarray:
+    """The initial extrinsic of a calibration of ``source`` (``--init``): ``T_cam_lidar``
+    (4x4) read from ``path`` by :func:`read_extrinsic`.
+
+    A KITTI ``calib_velo_to_cam.txt`` holds ``Tr_velo_to_cam`` (to the unrectified camera 0):
+    it is taken through the rectification of ``source`` (a folder, a source already detected
+    by :func:`~paretocal.io.detect_source`, or its loaded frames, a list of
+    :class:`~paretocal.io.Frame`), which must then be a KITTI source; ``camera`` is the
+    camera index used to detect a folder (default 2).
+
+    Raises :class:`InputError` naming the file when it cannot be read, or when it holds KITTI's
+    ``Tr`` and ``source`` is not a KITTI source.
+    """
+    from .exports import kitti_rect_of
+    from .layouts import detect_source
+
+    rect = None
+    if needs_kitti_rect(path):
+        if isinstance(source, (list, tuple)):
+            frames = source
+        else:
+            frames = (source if hasattr(source, "frames")
+                      else detect_source(Path(source), 2 if camera is None else camera)).frames
+        rect = kitti_rect_of(frames)
+        if rect is None:
+            where = (getattr(source, "root", source) if not isinstance(source, (list, tuple))
+                     else "the frames given")
+            raise InputError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
+                             f"camera 0) but {where} is not a KITTI source; give "
+                             "T_cam_lidar instead")
+    return read_extrinsic(path, kitti_rect=rect)
+
+
 def _kitti_text(path: Path) -> str | None:
     """The text of a KITTI-style ``key: values`` file with ``R:`` and ``T:`` lines, or None."""
     try:
