@@ -98,6 +98,13 @@ class TestGenericFolder:
         (lambda c: c["camera"].pop("K"), "missing camera.K"),
         (lambda c: c["camera"].update(K=[[1, 0], [0, 1]]), "3x3"),
         (lambda c: c.update(T_cam_lidar=[[1, 0, 0, 0]] * 3 + [[0, 0, 0, 1]]), "not a rotation"),
+        # A typo is named as an unknown key with the keys allowed, not as a missing one.
+        (lambda c: c["camera"].update(widht=c["camera"].pop("width")),
+         r"calib.yaml: camera: unknown key\(s\) widht \(expected K, width, height, model, D, "
+         r"xi, mask\)$"),
+        (lambda c: c.update(T_cam_lidr=c.pop("T_cam_lidar")),
+         r"calib.yaml: unknown key\(s\) T_cam_lidr \(expected camera, camera_info, "
+         r"T_cam_lidar, lidar_pose, points, mask, init_error, credit\)$"),
     ])
     def test_malformed_calib(self, tmp_path, raw_frames, edit, what):
         import yaml

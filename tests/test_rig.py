@@ -107,6 +107,14 @@ def _slash(d):
     d["cameras"][0]["name"] = "a/b"
 
 
+def _top_level_typo(d):
+    d["lidar_pos"] = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+
+
+def _camera_typo(d):
+    d["cameras"][1]["camera"]["widht"] = d["cameras"][1]["camera"].pop("width")
+
+
 @pytest.mark.parametrize("edit, words", [
     (_not_a_list, ["cameras must be a list of cameras"]),
     (_empty, ["cameras lists no camera"]),
@@ -118,6 +126,8 @@ def _slash(d):
     (_unknown_key, ["cameras.front", "extrinsic"]),
     (_bad_K, ["cameras.left: camera.K"]),
     (_top_level_camera, ["camera at the top level and 'cameras'"]),
+    (_top_level_typo, ["calib.yaml: unknown key(s) lidar_pos (expected cameras, lidar_pose,"]),
+    (_camera_typo, ["cameras.left: camera: unknown key(s) widht (expected K, width,"]),
 ])
 def test_bad_rig_calib_exits_2(tmp_path, capsys, edit, words):
     rig = make_rig(tmp_path, edit)

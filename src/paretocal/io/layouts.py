@@ -410,6 +410,7 @@ def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
         return _camera_info(cpath, cam, "camera.")
     if _is_message(cam):
         return _camera_info_message(cpath, cam, "camera.")
+    check_keys(cpath, cam, CAMERA_KEYS, "camera")
     for key in ("K", "width", "height"):
         if key not in cam:
             raise InputError(f"{cpath}: missing camera.{key}")
@@ -478,6 +479,7 @@ def _folder(root: Path) -> Source:
                          "'paretocal calibrate' takes a rig folder (all its cameras, or one "
                          "with --camera NAME); give other commands a single-camera folder (in "
                          "Python: paretocal.io.rig_cameras)")
+    check_keys(cpath, data, CALIB_KEYS)
     camera = _folder_camera(root, cpath, data)
     mask = _folder_mask(root, cpath, data, camera)
     T_ref = None
@@ -507,6 +509,23 @@ def _credit(cpath: Path, data: dict) -> str | None:
 
 #: The keys of one entry of a rig calib.yaml's ``cameras``.
 RIG_CAMERA_KEYS = ("name", "camera", "camera_info", "mask", "T_cam_lidar", "images")
+#: The keys of a calib.yaml: a single camera's (:func:`_folder`) and a rig's top level
+#: (:func:`rig_cameras`), and those of a ``camera`` section in the K / width / height form.
+CALIB_KEYS = ("camera", "camera_info", "T_cam_lidar", "lidar_pose", "points", "mask",
+              "init_error", "credit")
+RIG_KEYS = ("cameras", "lidar_pose", "points", "init_error", "credit")
+CAMERA_KEYS = ("K", "width", "height", "model", "D", "xi", "mask")
+
+
+def check_keys(cpath: Path, mapping: dict, allowed, where: str = "") -> None:
+    """An :class:`InputError` naming the file, where in it, the keys ``mapping`` holds that
+    are not ``allowed`` and the allowed ones: a typo (``widht``) is named as such, not
+    reported as a missing key."""
+    unknown = sorted(set(map(str, mapping)) - set(allowed))
+    if unknown:
+        at = f"{where}: " if where else ""
+        raise InputError(f"{cpath}: {at}unknown key(s) {key_list(unknown)} "
+                         f"(expected {', '.join(allowed)})")
 
 
 def is_rig(source: str | Path) -> bool:
@@ -551,10 +570,7 @@ def _rig_entries(cpath: Path, data: dict) -> list[tuple[str, dict]]:
         if name in seen:
             raise InputError(f"{cpath}: cameras: the name {name!r} is given twice")
         seen.add(name)
-        unknown = sorted(set(map(str, entry)) - set(RIG_CAMERA_KEYS))
-        if unknown:
-            raise InputError(f"{cpath}: cameras.{name}: unknown key(s) {key_list(unknown)} "
-                             f"(expected {', '.join(RIG_CAMERA_KEYS)})")
+        check_keys(cpath, entry, RIG_CAMERA_KEYS, f"cameras.{name}")
         out.append((name, entry))
     return out
 
@@ -609,6 +625,8 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
         raise InputError(f"{cpath}: not a rig: no 'cameras' list")
     entries = _rig_entries(cpath, data)
     clash = [k for k in ("camera", "camera_info", "T_cam_lidar", "mask") if data.get(k) is not None]
+    if not clash:
+        check_keys(cpath, data, RIG_KEYS)
     if clash:
         raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
                          "given; with several cameras each entry of cameras holds its own")
