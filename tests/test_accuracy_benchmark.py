@@ -69,7 +69,7 @@ def test_variants_of_a_generic_folder(acc, two_frames, tmp_path):
 
     src = write_generic(tmp_path / "src", two_frames)
     calib = read_mapping(src / "calib.yaml")
-    calib.update(init_error=[2.0, 0.05], note="kept")
+    calib.update(init_error=[2.0, 0.05], credit="kept")
     (src / "calib.yaml").write_text(yaml.safe_dump(calib))
     cache = {}
     for name in ("packet", "32beam+shuffled", "vehicle"):
@@ -121,7 +121,7 @@ def test_vehicle_reference_keeps_the_pixels(acc, raw_date, two_frames, tmp_path)
 
 def test_blind_copy_of_a_generic_folder(acc, raw_date, two_frames, tmp_path):
     folder, T_ref, _ = acc.build_variant(raw_date, "generic", tmp_path / "tiny", frames="0,10")
-    # Other keys must survive: a mask file (relative path) and a key the tool does not read.
+    # Other keys must survive: a mask file (relative path) and the free-text credit line.
     import cv2
 
     mask = np.full((two_frames[0].camera.height, two_frames[0].camera.width), 255, np.uint8)
@@ -129,7 +129,7 @@ def test_blind_copy_of_a_generic_folder(acc, raw_date, two_frames, tmp_path):
     cv2.imwrite(str(folder / "mask.png"), mask)
     calib = read_mapping(folder / "calib.yaml")
     calib["mask"] = "mask.png"
-    calib["note"] = {"rig": "tiny", "values": [1, 2.5]}
+    calib["credit"] = "tiny rig, frames 0 and 10"
     (folder / "calib.yaml").write_text(yaml.safe_dump(calib, sort_keys=False))
     np.testing.assert_allclose(acc.folder_reference(folder), T_ref)
     T0 = _start(T_ref)
