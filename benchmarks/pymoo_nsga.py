@@ -1,6 +1,6 @@
 """pymoo's own NSGA-II algorithm object on the calibration problem, for comparison.
 
-The package runs one NSGA-II engine, :class:`paretocal.search.lean.LeanNSGA2`: pymoo's operators,
+The package runs one NSGA-II engine, :class:`paretocal.search.engine.ArrayNSGA2`: pymoo's operators,
 sorting and crowding on plain arrays. This module keeps the algorithm-object version it was
 checked against (``benchmarks/speed.py`` times both; ``tests/test_search.py`` checks that they
 reach the same front): pymoo's ``NSGA2`` with the paper's operators, the binary tournament
@@ -19,7 +19,7 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.operators.sampling.rnd import FloatRandomSampling
 from pymoo.operators.selection.tournament import TournamentSelection
 
-from paretocal.search.lean import tournament_winners
+from paretocal.search.engine import tournament_winners
 from paretocal.search.nsga import SearchResult, TimedObjective, front_of
 from paretocal.search.problem import RoundN, SamplingWithInit, bounds
 

@@ -57,7 +57,7 @@ def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_
 
     T = raw_frames[0].T_ref @ correction_matrix(np.array([0.02, 0, 0, 0.5, 0, 0]))
     r = calibrate(raw_frames[:1], T, Settings().replace(search={"pop": 12, "gens": 2},
-                                                         decision={"refine": False}))
+                                                         decision={"polish": False}))
     out = tmp_path / "run"
     results.write_run(r, out, raw_frames[:1], figures=False)
     before = (out / "result.json").read_text()

@@ -409,7 +409,7 @@ def test_search_memory_per_individual_is_what_the_bound_says(raw_frames):
     (measured), and not much less (the bound would refuse populations that fit)."""
     from paretocal.config import (SEARCH_BYTES_PER_INDIVIDUAL,
                                   SEARCH_BYTES_PER_INDIVIDUAL_FRAME, SearchSettings)
-    from paretocal.search.lean import LeanNSGA2
+    from paretocal.search.engine import ArrayNSGA2
     from paretocal.search.nsga import initial_population
     from paretocal.search.problem import bounds, round_n
     from paretocal.stage import Stage
@@ -420,7 +420,7 @@ def test_search_memory_per_individual_is_what_the_bound_says(raw_frames):
     pop = 4000
     xl, xu = bounds(settings.search, stage.n_min, stage.n_max)
     X0 = initial_population(SearchSettings(pop=pop), xl, xu)
-    engine = LeanNSGA2(stage.objective.evaluate, xl, xu, pop, lambda X: round_n(X, xl, xu))
+    engine = ArrayNSGA2(stage.objective.evaluate, xl, xu, pop, lambda X: round_n(X, xl, xu))
     engine.step(engine.start(X0[:8], 0))                 # compiled and warm
     tracemalloc.start()
     try:
@@ -453,7 +453,7 @@ def test_n_range_beyond_what_the_frames_hold(capfd, tmp_path, rig, args, expect)
     ("features: {blur_sigma: -3}\n", "features: blur_sigma must not be negative"),
     ("features: {canny_noise: 0}\n", "canny_noise 0.0: must be positive"),
     ("search: {seed: -1}\n", "--seed -1: must be 0 or more"),
-    ("decision: {refine: maybe}\n", "decision.refine: expected true or false, got 'maybe'"),
+    ("decision: {polish: maybe}\n", "decision.polish: expected true or false, got 'maybe'"),
     ("1: 2\n", "unknown section(s) 1"),
 ])
 def test_bad_config_file(capfd, tmp_path, rig, text, expect):

@@ -21,7 +21,7 @@ from paretocal.errors import InputError
 from paretocal.geometry import correction_matrix
 from paretocal.io import write_extrinsic
 
-TINY = Settings().replace(search={"pop": 16, "gens": 3}, decision={"refine": False})
+TINY = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +140,7 @@ def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_
 def tiny_config(folder):
     path = folder / "tiny.yaml"
     path.write_text(yaml.safe_dump({"search": {"pop": 16, "gens": 3},
-                                    "decision": {"refine": False}}))
+                                    "decision": {"polish": False}}))
     return path
 
 

@@ -21,7 +21,7 @@ DEFAULT = (10.0, 0.3)
 #: A tiny run: a few seconds per calibration.
 TINY = Settings().replace(keep_none=True,
                           search={"pop": 12, "gens": 2, "seed_grid_deg": None},
-                          decision={"refine": False, "restarts": 0})
+                          decision={"polish": False, "restarts": 0})
 CLI_TINY = ["--pop", "12", "--gens", "2", "--no-polish", "--no-figures", "--quiet"]
 
 

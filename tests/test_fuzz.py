@@ -397,7 +397,7 @@ SECTION_KEYS = {"search": ["pop", "gens", "seed", "bound_t_m", "n_min", "n_max",
                            "seed_grid_deg", "popsize"],
                 "features": ["grid", "blur_sigma", "z_min", "reselect", "ring_method"],
                 "objective": ["w_edge", "ucb_k", "chamfer", "holdout"],
-                "decision": ["rule", "budget_ms", "refine"], "extra": ["x"]}
+                "decision": ["rule", "budget_ms", "polish"], "extra": ["x"]}
 config_values = st.one_of(yaml_scalars, st.lists(st.integers(-2, 10), max_size=3),
                           st.integers(0, 500), st.floats(0, 2))
 
@@ -523,6 +523,20 @@ def test_retired_settings_load_only_with_their_one_meaning(work):
     p.write_text("search:\n  engine: pymoo\n")
     with pytest.raises(SettingsError, match="engine"):
         load_settings(p)
+
+
+def test_renamed_settings_load_under_their_new_names(work):
+    """``decision.refine`` / ``refine_iters`` (files and saved runs written before the polish had
+    one name) load as ``decision.polish`` / ``polish_iters``; the new name wins when both are
+    given; the settings written name only the new keys."""
+    p = work / "old.yaml"
+    p.write_text("decision:\n  refine: false\n  refine_iters: 3\n")
+    s = load_settings(p)
+    assert (s.decision.polish, s.decision.polish_iters) == (False, 3)
+    assert Settings().replace(decision={"refine": False}).decision.polish is False
+    p.write_text("decision:\n  refine: false\n  polish: true\n")
+    assert load_settings(p).decision.polish is True
+    assert "refine" not in s.to_dict()["decision"] and "polish" in s.to_dict()["decision"]
 
 
 # --- geometry -------------------------------------------------------------------------------------

@@ -32,7 +32,7 @@ def run(raw_frames, tmp_path_factory):
     """A small real calibration (2 frames) written with its figures: (result, frames, folder)."""
     frames = raw_frames[:2]
     T_init = raw_frames[0].T_ref @ correction_matrix(np.array([0.05, -0.03, 0.02, 1, -1, 0.5]))
-    settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"refine": False})
+    settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
     result = calibrate(frames, T_init, settings)
     out = tmp_path_factory.mktemp("interactive_run")
     written = write_run(result, out, frames)

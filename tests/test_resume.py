@@ -24,7 +24,7 @@ from paretocal.search.checkpoint import Checkpoint, SearchInterrupted
 from .helpers import default_sigint
 
 SMALL = Settings().replace(search={"pop": 24, "gens": 12, "seed": 3},
-                           decision={"refine": False})
+                           decision={"polish": False})
 
 
 @pytest.fixture(scope="module")

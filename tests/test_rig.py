@@ -190,7 +190,7 @@ def test_two_camera_run(tmp_path, capsys):
     cams = dict(rig_cameras(rig))
     T_ref = {n: s.frames[0].T_ref for n, s in cams.items()}
     settings = Settings(frames="0:2").replace(search={"pop": 12, "gens": 2},
-                                               decision={"refine": False, "restarts": 0})
+                                               decision={"polish": False, "restarts": 0})
     out = tmp_path / "out"
     summary = calibrate_rig(rig, out, settings, T_inits=dict(T_ref), figures=False)
     assert summary["lidar_steps_done"] == 1

@@ -20,7 +20,7 @@ from paretocal.errors import InputError
 from paretocal.search.checkpoint import SearchInterrupted
 
 SETTINGS = Settings(frames="0:2").replace(search={"pop": 16, "gens": 6, "seed": 2},
-                                           decision={"refine": False})
+                                           decision={"polish": False})
 #: The command line of the runs above (the same run as SETTINGS, minus the seed).
 CLI = ["--frames", "0:2", "--pop", "16", "--gens", "6", "--no-polish", "--no-figures",
        "--quiet", "--checkpoint-every", "2"]
@@ -64,7 +64,7 @@ def result(raw_frames):
     from paretocal import calibrate
 
     return calibrate(raw_frames[:1], None, Settings().replace(
-        search={"pop": 12, "gens": 2}, decision={"refine": False}))
+        search={"pop": 12, "gens": 2}, decision={"polish": False}))
 
 
 def _copy(run: Path, tmp_path: Path) -> Path:

@@ -165,9 +165,9 @@ def test_survival_ranks_and_crowding_are_pymoos(rng):
     from pymoo.operators.survival.rank_and_crowding.metrics import get_crowding_function
     from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
-    from paretocal.search.lean import LeanNSGA2
+    from paretocal.search.engine import ArrayNSGA2
 
-    engine = LeanNSGA2(None, np.zeros(7), np.ones(7), 10, None)
+    engine = ArrayNSGA2(None, np.zeros(7), np.ones(7), 10, None)
     cd = get_crowding_function("cd")
     for trial in range(200):
         m = int(rng.integers(1, 120))
@@ -196,7 +196,7 @@ def test_a_front_polished_without_exploring_keeps_its_n():
     """``polish_front(explore=False)`` (the basin test's polish from one optimum) polishes the
     given solutions only: every n of the result is one of theirs, with fewer evaluations than
     the exploring polish (n grid, valley starts, cross-seeds), which adds n values."""
-    from paretocal.search.refine import polish_front
+    from paretocal.search.front_polish import polish_front
 
     center = np.array([0.02, -0.01, 0.03, 0.4, -0.3, 0.2])
 

@@ -147,7 +147,7 @@ def study(tmp_path_factory, raw_frames):
 
     out = tmp_path_factory.mktemp("study")
     T_init = raw_frames[0].T_ref @ correction_matrix(np.array([0.05, -0.03, 0.02, 1, -1, 0.5]))
-    settings = Settings().replace(decision={"refine_iters": 2})
+    settings = Settings().replace(decision={"polish_iters": 2})
     doc = run_study(raw_frames[:2], out, T_init, settings, TINY)
     return out, doc
 

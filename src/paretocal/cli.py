@@ -263,7 +263,7 @@ def calibrate(
                    "cost": cost.value if cost else None,
                    "evaluator": evaluator.value if evaluator else None},
         decision={"rule": rule.value if rule else None, "budget_ms": budget_ms,
-                  "refine": polish, "max_deviation_px": max_deviation})
+                  "polish": polish, "max_deviation_px": max_deviation})
     import dataclasses
 
     from .config import states_init_error

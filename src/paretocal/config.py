@@ -130,8 +130,8 @@ class DecisionSettings:
     rule: str = "knee"               #: "knee", "knee-chamfer", "budget" or "min-chamfer"
     budget_ms: float | None = None   #: with rule "budget": modelled evaluation time limit (ms)
     max_deviation_px: float = 1.0    #: knee: only solutions this close to the best-supported one
-    refine: bool = True              #: polish the front locally at each solution's n
-    refine_iters: int = 12           #: Newton iterations of the polish
+    polish: bool = True              #: polish the front locally at each solution's n
+    polish_iters: int = 12           #: Newton iterations of the polish
     restarts: int = 1                #: independent restarts checking the result (0: none)
     restart_share: float = 0.25      #: each restart's share of the search's evaluations
 
@@ -174,6 +174,7 @@ class Settings:
                 continue
             current = getattr(out, name, None)
             if dataclasses.is_dataclass(current):
+                values = _renamed(name, values)
                 _check_keys(type(current), values, name)
                 values = {k: _coerce(f"{name}.{k}", v, _field_types(type(current))[k])
                           for k, v in values.items()}
@@ -307,8 +308,8 @@ def _check_decision(d: DecisionSettings) -> None:
         raise SettingsError(f"decision.restarts {d.restarts}: between 0 and 10")
     if not 0.0 < d.restart_share <= 1.0:
         raise SettingsError(f"decision.restart_share {d.restart_share}: must lie in (0, 1]")
-    if d.refine_iters < 0:
-        raise SettingsError(f"refine_iters {d.refine_iters}: must not be negative")
+    if d.polish_iters < 0:
+        raise SettingsError(f"polish_iters {d.polish_iters}: must not be negative")
 
 
 def _check_motion(m: MotionSettings) -> None:
@@ -504,6 +505,21 @@ _ONE_ENGINE = "the package runs one NSGA-II engine, on arrays; pymoo's own algor
 RETIRED = {("search", "engine"): ("lean", _ONE_ENGINE),
            ("search", "eliminate_duplicates"): (False, _ONE_ENGINE + ", and only it eliminated "
                                                        "duplicates")}
+
+
+#: Settings that were renamed: files and saved runs written before load under the new name.
+RENAMED = {("decision", "refine"): "polish", ("decision", "refine_iters"): "polish_iters"}
+
+
+def _renamed(section: str, values: dict) -> dict:
+    """``values`` of ``section`` with renamed keys under their current names (the current
+    name wins when both are given)."""
+    out = dict(values)
+    for (sec, old), new in RENAMED.items():
+        if sec == section and old in out:
+            value = out.pop(old)
+            out.setdefault(new, value)
+    return out
 
 
 def _drop_retired(data: dict, name: str) -> dict:

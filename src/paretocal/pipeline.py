@@ -143,7 +143,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
                                  d.max_deviation_px)
             decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                             "polished": bool(d.refine),
+                             "polished": bool(d.polish),
                              "best_supported_n": int(round(X[best, 6])), "basin": basin})
             # The model decides (reproducibly); the time measured now is reported beside it.
             decision["measured_ms"] = time_per_candidate(
@@ -275,18 +275,18 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
     """Polish the front, test the near/far basins, and re-select the feature points at the
     estimate. Returns ``(stage, X, F, basin, evaluations)`` (the stage after re-selection)."""
     X, F, evaluations, basin = res.X, res.F, res.evaluations, None
-    if not settings.decision.refine:
+    if not settings.decision.polish:
         return stage, X, F, basin, evaluations
     steps = 1 + int(settings.features.reselect)
     tick = (lambda k: progress("polish", k, steps)) if progress is not None else (lambda k: None)
     tick(0)
     with _timed(timings, "polish"):
         X, F, ev = polish_front(stage.objective, X, F, settings.search, stage.n_min,
-                                stage.n_max, settings.decision.refine_iters)
+                                stage.n_max, settings.decision.polish_iters)
         # A pose far from the start replaces the start's own basin only when the frames
         # clearly prefer it (search.basin).
         X, F, basin, ev2 = prefer_near(stage.objective, X, F, settings.search, stage.n_min,
-                                       stage.n_max, settings.decision.refine_iters)
+                                       stage.n_max, settings.decision.polish_iters)
     evaluations += ev + ev2
     tick(1)
     if settings.features.reselect:
@@ -302,7 +302,7 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective
             X, F, ev = polish_front(obj, X, obj.evaluate(X), settings.search, stage.n_min,
-                                     stage.n_max, settings.decision.refine_iters)
+                                     stage.n_max, settings.decision.polish_iters)
         evaluations += ev + len(X)
         tick(2)
     return stage, X, F, basin, evaluations

@@ -2,7 +2,7 @@
 
 from .nsga import SearchResult, front_indices, front_of, initial_population, run_nsga2
 from .problem import UNITS, VARIABLES, bounds
-from .refine import polish_front
+from .front_polish import polish_front
 from .seeding import coarse_seeds
 
 __all__ = ["SearchResult", "UNITS", "VARIABLES", "bounds", "coarse_seeds", "front_indices",

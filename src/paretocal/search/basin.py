@@ -23,7 +23,7 @@ import numpy as np
 
 from ..config import SearchSettings
 from ..quality import displacement_px, local_optimum
-from .refine import polish_front
+from .front_polish import polish_front
 
 #: One-sided p value of the paired t test (per-frame objective differences) below which the
 #: data "clearly prefer" a pose beyond the stated initial error.
@@ -72,7 +72,7 @@ def departure(x: np.ndarray, init_error_deg: float, init_error_m: float) -> floa
 
 
 def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
-                n_max: int, refine_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
+                n_max: int, polish_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
     """Keep the start's basin unless the data support the front's best pose (module docstring).
 
     Parameters
@@ -83,7 +83,7 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
     search : SearchSettings
         The box and the stated initial error.
     n_min, n_max : int
-    refine_iters : int
+    polish_iters : int
         Newton iterations of the front's polish when the front is rebuilt.
 
     Returns
@@ -148,5 +148,5 @@ def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings,
     ns = np.unique(X[:, 6])
     Xn = np.column_stack([np.tile(kept[:6], (len(ns), 1)), ns])
     Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), search, n_min, n_max,
-                               refine_iters, explore=rebuild)
+                               polish_iters, explore=rebuild)
     return Xn, Fn, info, evals + ev + len(Xn)

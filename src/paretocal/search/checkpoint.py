@@ -117,7 +117,7 @@ class Checkpoint:
         Raises :class:`InputError` when the file belongs to another run, is unreadable or
         holds a field out of range (naming it).
         """
-        from .lean import LeanState
+        from .engine import EngineState
 
         path = Path(self.path)
         unreadable = (OSError, ValueError, KeyError, TypeError, AttributeError,
@@ -140,7 +140,7 @@ class Checkpoint:
         _check_state(path, meta, arrays, pop, gens, np.asarray(xl), np.asarray(xu))
         bit_gen = np.random.PCG64()
         bit_gen.state = meta["rng"]
-        state = LeanState(rng=np.random.Generator(bit_gen), generation=meta["generation"],
+        state = EngineState(rng=np.random.Generator(bit_gen), generation=meta["generation"],
                           evaluations=meta["evaluations"], **arrays)
         return state, meta["history"]
 

@@ -1,6 +1,6 @@
 """NSGA-II with the paper's operators, run generation by generation.
 
-One engine: :class:`~paretocal.search.lean.LeanNSGA2` (pymoo's operators, sorting and crowding on
+One engine: :class:`~paretocal.search.engine.ArrayNSGA2` (pymoo's operators, sorting and crowding on
 plain arrays). pymoo's own algorithm object runs the same NSGA-II about three times slower per
 generation; it is kept in ``benchmarks/pymoo_nsga.py``, where the speed benchmark and a test
 compare the two.
@@ -18,7 +18,7 @@ from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 from ..config import SearchSettings
 from ..errors import STOP
 from .checkpoint import Checkpoint, SearchInterrupted
-from .lean import LeanNSGA2
+from .engine import ArrayNSGA2
 from .problem import bounds, place_seeds, round_n
 
 log = logging.getLogger(__name__)
@@ -120,7 +120,7 @@ def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
             progress(gen, settings.gens, best)
 
     t0 = time.perf_counter()
-    engine = LeanNSGA2(timed.evaluate, xl, xu, settings.pop, lambda X: round_n(X, xl, xu),
+    engine = ArrayNSGA2(timed.evaluate, xl, xu, settings.pop, lambda X: round_n(X, xl, xu),
                        settings.sbx_prob, settings.sbx_eta, settings.pm_eta)
     saved = (checkpoint.load(settings.pop, settings.gens, xl, xu) if checkpoint is not None
              else None)

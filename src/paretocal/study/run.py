@@ -200,8 +200,8 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     tick("epsilon_constraint", 0, len(eps))
     ec = epsilon_constraint(obj, eps, xl, xu, plan.eps_pop, plan.eps_gens,
                             seed=settings.search.seed, seeds=result.seed_poses, F_front=F,
-                            polish_iters=settings.decision.refine_iters
-                            if settings.decision.refine else 0)
+                            polish_iters=settings.decision.polish_iters
+                            if settings.decision.polish else 0)
     timings["epsilon_constraint"] = time.perf_counter() - t0
     if T_ref is not None:
         for r in ec:

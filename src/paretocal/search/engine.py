@@ -93,7 +93,7 @@ def tournament_winners(F: np.ndarray, crowding: np.ndarray, a: np.ndarray, b: np
 
 
 @dataclass
-class LeanState:
+class EngineState:
     """Everything a run needs to continue: population, objectives, ranks, crowding, RNG."""
 
     X: np.ndarray
@@ -105,7 +105,7 @@ class LeanState:
     evaluations: int
 
 
-class LeanNSGA2:
+class ArrayNSGA2:
     """NSGA-II over a box, one generation per :meth:`step`.
 
     Parameters
@@ -132,15 +132,15 @@ class LeanNSGA2:
         self.sbx_prob = float(sbx_prob)
         self.pm = PM(eta=pm_eta, at_least_once=True)
 
-    def start(self, X0: np.ndarray, seed: int) -> LeanState:
+    def start(self, X0: np.ndarray, seed: int) -> EngineState:
         """Evaluate the initial population (pop_size, n_var) and rank it."""
         rng = np.random.default_rng(seed)
         X = self.repair(np.array(X0, dtype=np.float64))
         F = np.asarray(self.evaluate(X), dtype=np.float64)
         rank, cd, keep = self._survive(F, len(F), rng)
-        return LeanState(X[keep], F[keep], rank, cd, rng, 1, len(X))
+        return EngineState(X[keep], F[keep], rank, cd, rng, 1, len(X))
 
-    def step(self, s: LeanState) -> LeanState:
+    def step(self, s: EngineState) -> EngineState:
         """One generation: tournament, SBX, PM, repair, evaluation, rank-and-crowding survival.
 
         ``s`` is left untouched (its Generator included), so an interrupt inside a step
@@ -162,10 +162,10 @@ class LeanNSGA2:
         X = np.vstack([s.X, off])
         F = np.vstack([s.F, Foff])
         rank, cd, keep = self._survive(F, self.pop_size, rng)
-        return LeanState(X[keep], F[keep], rank, cd, rng, s.generation + 1,
+        return EngineState(X[keep], F[keep], rank, cd, rng, s.generation + 1,
                          s.evaluations + len(off))
 
-    def _tournament(self, s: LeanState, n: int, rng: np.random.Generator) -> np.ndarray:
+    def _tournament(self, s: EngineState, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` winners of binary tournaments between random permutations of the population."""
         m = len(s.X)
         perms = np.concatenate([rng.permutation(m) for _ in range(math.ceil(2 * n / m))])

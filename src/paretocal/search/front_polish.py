@@ -1,4 +1,4 @@
-"""Local refinement of a whole front after the search (see :func:`polish_front`)."""
+"""The polish of a whole front after the search (see :func:`polish_front`)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings
 
     ``objective`` has ``chamfer(X)["f1"]`` and ``cost(X)["f2"]`` for X of shape (C, 7); the
     box is the search's (``search``, ``n_min``, ``n_max``); ``iters`` Newton iterations per
-    polish (``decision.refine_iters``). Returns the new front ``(X, F)`` and the number of evaluations spent.
+    polish (``decision.polish_iters``). Returns the new front ``(X, F)`` and the number of evaluations spent.
 
     Then the weakly determined directions of the best pose are explored: edge alignment
     constrains some combinations poorly (a small pitch against a few centimetres of height
