@@ -187,7 +187,7 @@ def run_trial(case: Case, k: int, work: Path) -> dict:
         half_width=half,
         covered={a: (None if half.get(a) is None else bool(abs(d[i]) <= half[a]))
                  for i, a in enumerate(AXES)},
-        jackknife_se=(r.quality or {}).get("jackknife_se"),
+        jackknife_se=None if r.quality is None else r.quality.to_dict()["jackknife_se"],
         resolution_per_px=iv.get("resolution_per_px"),
         evidence=rel.get("evidence"), basin=(r.decision or {}).get("basin"),
         verdict_s=float(r.timings.get("verdict", 0.0)), total_s=float(r.timings["total"]),

@@ -668,11 +668,13 @@ def test_a_correction_held_by_the_bounds_is_flagged(capfd, tmp_path, rig3, pertu
 
 def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
-    from paretocal.quality import AXES, UNITS
+    from paretocal.quality import AXES, UNITS, Quality
 
+    # In result.json's form (cm and deg), read back as the run holds it.
     q = {"units": dict(zip(AXES, UNITS)), "jackknife_se": dict.fromkeys(AXES, 0.1),
          "step_to_local_optimum": dict.fromkeys(AXES, 0.0)}
     q.update(over.pop("quality", {}))
+    q = Quality.from_dict(q)
     X = np.zeros((1, 7))
     X[0, :6] = over.pop("x", np.zeros(6))
     deg, m = over.pop("init_error", (10.0, 0.3))

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from paretocal.quality import TO_REPORT, neighbour_fraction, quality_report
+from paretocal.quality import TO_REPORT, Quality, neighbour_fraction, quality_report
 from paretocal.testing import kitti_truth
 
 
@@ -31,12 +31,18 @@ def bowls(rng):
 def test_jackknife_is_the_standard_error_of_the_frame_minima(bowls):
     x = np.r_[bowls.m.mean(axis=0), 100.0]
     q = quality_report(bowls, x)
-    expect = bowls.m.std(axis=0, ddof=1) / np.sqrt(len(bowls.m)) * TO_REPORT
-    got = np.array([q["jackknife_se"][a] for a in ("x", "y", "z", "yaw", "pitch", "roll")])
-    np.testing.assert_allclose(got, expect, rtol=1e-6)
+    expect = bowls.m.std(axis=0, ddof=1) / np.sqrt(len(bowls.m))           # m and deg
+    np.testing.assert_allclose(q.jackknife_se, expect, rtol=1e-6)
     # Each frame's own step lands on its own minimum.
-    step0 = np.array(list(q["frame_steps"][0].values())) / TO_REPORT
-    np.testing.assert_allclose(x[:6] + step0, bowls.m[0], atol=1e-9)
+    np.testing.assert_allclose(x[:6] + q.frame_steps[0], bowls.m[0], atol=1e-9)
+    # result.json's form: cm and deg, by axis name; read back, the same report.
+    doc = q.to_dict()
+    got = np.array([doc["jackknife_se"][a] for a in ("x", "y", "z", "yaw", "pitch", "roll")])
+    np.testing.assert_allclose(got, expect * TO_REPORT, rtol=1e-12)
+    back = Quality.from_dict(doc)
+    for name in ("fd_step", "curvature", "tolerance", "flattest_direction", "jackknife_se",
+                 "step_to_local_optimum", "frame_steps", "well_observed"):
+        np.testing.assert_allclose(getattr(back, name), getattr(q, name), rtol=1e-12)
 
 
 class TiltedFrames(QuadraticFrames):
@@ -64,10 +70,10 @@ def test_a_curvature_the_frames_do_not_agree_on_is_not_divided_by(rng):
     minima = rng.normal(scale=[0.01, 0.01, 0.01, 0.05, 0.05, 0.05], size=(12, 6))
     frames = TiltedFrames(minima, H, [1, -1] * 6)
     x = np.r_[minima.mean(axis=0), 100.0]
-    se = quality_report(frames, x)["jackknife_se"]
-    assert 0 < se["roll"] < 5 * minima[:, 5].std()
-    expect = minima[:, 0].std(ddof=1) / np.sqrt(12) * 100                 # cm
-    assert se["x"] == pytest.approx(expect, rel=1e-6)
+    se = quality_report(frames, x).jackknife_se                          # m and deg
+    assert 0 < se[5] < 5 * minima[:, 5].std()
+    expect = minima[:, 0].std(ddof=1) / np.sqrt(12)
+    assert se[0] == pytest.approx(expect, rel=1e-6)
 
 
 def test_curvature_and_flattest_direction(bowls):
@@ -75,10 +81,11 @@ def test_curvature_and_flattest_direction(bowls):
     q = quality_report(bowls, x)
     # The least curved axis in units of the steps is roll (weight 0.2); the direction is
     # scaled so that its largest part is one step (1 cm or 0.1 deg).
-    flat = q["flattest_direction"]
-    assert abs(flat["roll"]) == pytest.approx(0.1) and abs(flat["x"]) < 1e-6   # 0.1 deg
-    # Curvature reported per cm^2 / deg^2: the 2 H_ii of the mean bowl.
-    assert q["curvature_px_per_unit2"]["x"] == pytest.approx(2 * bowls.H[0, 0] / 100**2)
+    flat = q.flattest_direction
+    assert abs(flat[5]) == pytest.approx(0.1) and abs(flat[0]) < 1e-8         # 0.1 deg
+    # The 2 H_ii of the mean bowl, per m^2 (result.json: per cm^2).
+    assert q.curvature[0] == pytest.approx(2 * bowls.H[0, 0])
+    assert q.to_dict()["curvature_px_per_unit2"]["x"] == pytest.approx(2 * bowls.H[0, 0] / 100**2)
 
 
 def test_neighbour_fraction_at_and_away_from_the_minimum(bowls):

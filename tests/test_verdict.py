@@ -122,9 +122,10 @@ def test_resolution_is_the_step_that_moves_points_one_pixel(stage):
 
 
 def test_intervals_combine_jackknife_and_alignment():
-    se = {"x": 3.0, "y": 4.0, "z": float("nan"), "yaw": 0.1, "pitch": 50.0, "roll": 0.0}
+    # The jackknife in m and deg: x 3 cm, y 4 cm, z none, yaw 0.1, pitch 50, roll 0 deg.
+    se = np.array([0.03, 0.04, np.nan, 0.1, 50.0, 0.0])
     per_px = np.array([0.04, 0.0, 0.01, 0.0, 0.1, 0.2])      # m and deg per pixel rms
-    iv = intervals({"jackknife_se": se}, per_px, 1.5, Settings().search)
+    iv = intervals(se, per_px, 1.5, Settings().search)
     h = iv["half_width"]
     assert h["x"] == pytest.approx(np.hypot(Z95 * 3.0, 1.5 * 4.0), rel=1e-4)    # cm
     assert h["y"] == pytest.approx(Z95 * 4.0, rel=1e-4)
@@ -138,13 +139,13 @@ def test_intervals_combine_jackknife_and_alignment():
     assert interval_text({}) is None
     # A shared bias bounded per axis (the LiDAR's sampling) replaces alignment x per pixel.
     bias = np.array([0.09, 0.0, 0.01, 0.0, 0.1, 0.6])                # m and deg
-    iv = intervals({"jackknife_se": se}, per_px, 1.5, Settings().search,
+    iv = intervals(se, per_px, 1.5, Settings().search,
                    sampling_px=np.array([7.0, 6.0]), bias=bias)
     assert iv["half_width"]["x"] == pytest.approx(np.hypot(Z95 * 3.0, 9.0), rel=1e-4)
     assert iv["half_width"]["roll"] == pytest.approx(0.6, rel=1e-4)
     assert iv["sampling_px"] == [7.0, 6.0] and iv["bias"]["x"] == 9.0
     # Without any matched edge the alignment is unknown: nothing is determined.
-    assert intervals({"jackknife_se": se}, per_px, float("nan"),
+    assert intervals(se, per_px, float("nan"),
                      Settings().search)["undetermined"] == list(AXES)
 
 

@@ -89,7 +89,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "neighbour_step": {"translation_cm": 5.0, "rotation_deg": 0.5},
         "T_checked": T.tolist(),
         "T_local_optimum": T_opt.tolist(),
-        "quality": quality,
+        "quality": quality.to_dict(),
         "frames": [f.name for f in frames],
         "features": feature_counts(stage.feats),
     }

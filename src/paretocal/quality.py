@@ -17,6 +17,8 @@ around the extrinsic (28 candidates), read frame by frame:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .geometry import correction_matrix
@@ -96,7 +98,94 @@ def at_every_point(objective, x: np.ndarray) -> np.ndarray:
     return x
 
 
-def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> dict:
+@dataclass(frozen=True)
+class Quality:
+    """The quality report of an extrinsic (:func:`quality_report`), in SI units.
+
+    Every per-axis array is on the correction's axes ``x, y, z, yaw, pitch, roll``
+    (:data:`AXES`: translation in the LiDAR frame in metres, rotation in degrees).
+
+    Attributes
+    ----------
+    frames : int
+        Frames the report is over.
+    fd_step : ndarray, shape (6,)
+        Finite-difference steps (m, deg).
+    curvature : ndarray, shape (6,)
+        The objective's second derivative along each axis (px per m^2, px per deg^2).
+    tolerance : ndarray, shape (6,)
+        The change along each axis alone that raises the objective by 0.01 px (m, deg).
+    flattest_direction : ndarray, shape (6,)
+        The combination of axes the scene constrains least (m, deg), scaled so that its
+        largest part is 1 cm or 0.1 deg; ``flattest_eigenvalue_ratio`` its curvature over the
+        steepest direction's.
+    flattest_eigenvalue_ratio : float
+    jackknife_se : ndarray, shape (6,)
+        Jackknife standard error of each axis over the frames (m, deg); NaN with one frame.
+    step_to_local_optimum : ndarray, shape (6,)
+        The Newton step to the minimum of the local quadratic (m, deg).
+    frame_steps : ndarray, shape (F, 6)
+        Each frame's own Newton step (m, deg): which frames disagree.
+    well_observed : ndarray, shape (6,), bool
+        Jackknife standard error under 3 cm or 0.2 deg.
+    """
+
+    frames: int
+    fd_step: np.ndarray
+    curvature: np.ndarray
+    tolerance: np.ndarray
+    flattest_direction: np.ndarray
+    flattest_eigenvalue_ratio: float
+    jackknife_se: np.ndarray
+    step_to_local_optimum: np.ndarray
+    frame_steps: np.ndarray
+    well_observed: np.ndarray
+
+    def to_dict(self) -> dict:
+        """The report as ``result.json`` writes it: per axis by name, translation in cm (the
+        curvature per cm^2), rotation in deg; ``frame`` ``"lidar"`` and ``units``."""
+        def per_axis(v):
+            return {a: float(val) for a, val in zip(AXES, np.asarray(v) * TO_REPORT)}
+
+        return {
+            "frame": "lidar",                 # the per-axis figures are the correction's axes
+            "units": dict(zip(AXES, UNITS)),
+            "frames": int(self.frames),
+            "fd_step": per_axis(self.fd_step),
+            "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)
+                                       for i, (a, c) in enumerate(zip(AXES, self.curvature))},
+            "tolerance_0p01px": per_axis(self.tolerance),
+            "flattest_direction": per_axis(self.flattest_direction),
+            "flattest_eigenvalue_ratio": float(self.flattest_eigenvalue_ratio),
+            "jackknife_se": per_axis(self.jackknife_se),
+            "step_to_local_optimum": per_axis(self.step_to_local_optimum),
+            "frame_steps": [per_axis(s) for s in self.frame_steps],
+            "well_observed": {a: bool(v) for a, v in zip(AXES, self.well_observed)},
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "Quality":
+        """The report read back from its :meth:`to_dict` form (``result.json``'s
+        ``quality``); a key it lacks reads as NaN (False for ``well_observed``)."""
+        def si(key):
+            v = doc.get(key) or {}
+            return np.array([v.get(a, np.nan) for a in AXES], dtype=np.float64) / TO_REPORT
+
+        curv = doc.get("curvature_px_per_unit2") or {}
+        return cls(
+            frames=int(doc.get("frames", 0)), fd_step=si("fd_step"),
+            curvature=np.array([curv.get(a, np.nan) for a in AXES], float) * TO_REPORT ** 2,
+            tolerance=si("tolerance_0p01px"), flattest_direction=si("flattest_direction"),
+            flattest_eigenvalue_ratio=float(doc.get("flattest_eigenvalue_ratio", np.nan)),
+            jackknife_se=si("jackknife_se"), step_to_local_optimum=si("step_to_local_optimum"),
+            frame_steps=np.array([[s.get(a, np.nan) for a in AXES]
+                                  for s in doc.get("frame_steps") or []],
+                                 dtype=np.float64).reshape(-1, 6) / TO_REPORT,
+            well_observed=np.array([bool((doc.get("well_observed") or {}).get(a, False))
+                                    for a in AXES]))
+
+
+def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> Quality:
     """Curvature, identifiability and frame agreement of the extrinsic ``x``.
 
     Parameters
@@ -110,11 +199,8 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
 
     Returns
     -------
-    dict, ready for JSON: ``frame`` (``"lidar"``: every per-axis figure is on the
-    correction's axes, translation in the LiDAR frame), ``curvature`` per axis,
-    ``fd_step`` (``h``), ``tolerance_0p01`` per axis, ``flattest`` direction, ``jackknife_se``
-    per axis,
-    ``frame_steps`` (each frame's Newton step), and ``well_observed`` per axis.
+    Quality
+        In metres and degrees (:meth:`Quality.to_dict` gives ``result.json``'s form).
     """
     x = at_every_point(objective, x)
     S = fd_stencil(h)
@@ -130,27 +216,12 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
     flat /= np.abs(flat / np.r_[[0.01] * 3, [0.1] * 3]).max()         # largest part 1 cm / 0.1 deg
     steps = np.array([_newton_step(*_derivatives(per_frame[:, f], h), h) for f in range(F)])
     se = _jackknife_se(per_frame, H, h)
-    full_step = _newton_step(g, H, h)
-
-    def per_axis(v):
-        return {a: float(val) for a, val in zip(AXES, v * TO_REPORT)}
-
-    return {
-        "frame": "lidar",                     # the per-axis figures are the correction's axes
-        "units": dict(zip(AXES, UNITS)),
-        "frames": int(F),
-        "fd_step": per_axis(np.asarray(h, dtype=np.float64)),
-        "curvature_px_per_unit2": {a: float(c / TO_REPORT[i] ** 2)
-                                   for i, (a, c) in enumerate(zip(AXES, curv))},
-        "tolerance_0p01px": per_axis(tol),
-        "flattest_direction": per_axis(flat),
-        "flattest_eigenvalue_ratio": float(w[0] / max(w[-1], 1e-12)),
-        "jackknife_se": per_axis(se),
-        "step_to_local_optimum": per_axis(full_step),
-        "frame_steps": [per_axis(s) for s in steps],
-        "well_observed": {a: bool(np.isfinite(v) and v < (3.0 if u == "cm" else 0.2))
-                          for a, v, u in zip(AXES, se * TO_REPORT, UNITS)},
-    }
+    well = np.isfinite(se) & (se < np.r_[[0.03] * 3, [0.2] * 3])
+    return Quality(frames=int(F), fd_step=np.asarray(h, dtype=np.float64).copy(),
+                   curvature=curv, tolerance=tol, flattest_direction=flat,
+                   flattest_eigenvalue_ratio=float(w[0] / max(w[-1], 1e-12)),
+                   jackknife_se=se, step_to_local_optimum=_newton_step(g, H, h),
+                   frame_steps=steps.reshape(-1, 6), well_observed=well)
 
 
 def axis_resolution(objective, x: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ from .config import Settings
 from .geometry import pose_error
 from .objective import CalibrationObjective
 from .objective.cost import CostModel
+from .quality import Quality
 from .search import VARIABLES
 from .verdict import reliability
 
@@ -59,7 +60,8 @@ class CalibrationResult:
     n_range: tuple[int, int]
     history: list = field(default_factory=list)
     nsga_front: tuple | None = None
-    quality: dict | None = None
+    #: The quality report at the result (metres and degrees; ``result.json`` writes it in cm).
+    quality: Quality | None = None
     #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
     reliability: dict | None = None
     #: What was done about motion during the sweeps (see :func:`compensate_motion`).
@@ -138,7 +140,7 @@ class CalibrationResult:
             "cost_model": self.cost_model.to_dict(),
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
-            "quality": self.quality,
+            "quality": None if self.quality is None else self.quality.to_dict(),
             "motion": self.motion,
             "inputs": self.inputs,
             "wide_start": self.wide,

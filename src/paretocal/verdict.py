@@ -39,8 +39,8 @@ from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
 from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import (AXES, TO_REPORT, at_every_point, axis_resolution, displacement_px,
-                      local_optimum, pixel_fd_step, quality_report)
+from .quality import (AXES, TO_REPORT, UNITS, Quality, at_every_point, axis_resolution,
+                      displacement_px, local_optimum, pixel_fd_step, quality_report)
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -401,13 +401,14 @@ def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
     return float(align_px)
 
 
-def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: SearchSettings,
+def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
+              search: SearchSettings,
               res_per_px: np.ndarray | None = None, *, sampling_px: np.ndarray | None = None,
               bias: np.ndarray | None = None) -> dict:
     """Per-axis 95 % intervals of the correction (report units: cm and deg).
 
     Two parts, combined in quadrature: the frames' disagreement, ``Z95`` jackknife standard
-    errors (``quality["jackknife_se"]``); and what no agreement among frames can show, a bias
+    errors (``jackknife_se``); and what no agreement among frames can show, a bias
     they all share (the LiDAR's edges and the image's are not the same lines, a reference or
     intrinsics off by a constant image offset, the LiDAR placing every edge between its
     returns by one rule): the result is taken to be known to within the image alignment it
@@ -421,8 +422,9 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
 
     Parameters
     ----------
-    quality : dict
-        The quality report (``jackknife_se`` in cm and deg).
+    jackknife_se : ndarray, shape (6,)
+        The frames' jackknife standard errors (m and deg;
+        :attr:`~paretocal.quality.Quality.jackknife_se`), NaN where there is none.
     per_px : ndarray, shape (6,)
         :func:`pose_per_px` (m and deg per pixel).
     align_px : float
@@ -446,7 +448,7 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
         axis moved). The true extrinsic lies, per axis, within ``T_cam_lidar @ D(d)`` for
         ``|d_axis| <= half_width``.
     """
-    se = np.array([(quality.get("jackknife_se") or {}).get(a, np.nan) for a in AXES], float)
+    se = np.asarray(jackknife_se, dtype=np.float64) * TO_REPORT
     m = np.asarray(per_px, dtype=np.float64) * TO_REPORT
     b = (align_px * m if bias is None else np.asarray(bias, dtype=np.float64) * TO_REPORT)
     if not np.isfinite(align_px):
@@ -474,7 +476,7 @@ def intervals(quality: dict, per_px: np.ndarray, align_px: float, search: Search
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                    quality: dict, sampling: np.ndarray | None = None,
+                    quality: Quality, sampling: np.ndarray | None = None,
                     cameras: dict | None = None) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring).
@@ -498,7 +500,7 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     per_px = pose_per_px(objective, x_opt)
     out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
            "start": start_evidence(objective, x_opt),
-           "intervals": intervals(at_opt, per_px, align, settings.search,
+           "intervals": intervals(at_opt.jackknife_se, per_px, align, settings.search,
                                   axis_resolution(objective, x_opt), sampling_px=sampling,
                                   bias=bias_tolerance_px(align, sampling) * per_px)}
     if restart is not None:
@@ -566,11 +568,9 @@ def reliability(result: "CalibrationResult") -> dict:
                        f"--init-error {s.init_error_deg:g},{s.init_error_m:g}): either the "
                        "start was worse than stated (say so with --init-error) or the frames "
                        "mislead the objective; check the overlays")
-    q = result.quality or {}
-    step = q.get("step_to_local_optimum")
-    if step is not None:
-        to_si = np.r_[[0.01] * 3, [1.0] * 3]              # the report's cm -> m, deg stays
-        target = x + np.array([step[a] for a in AXES]) * to_si
+    q = result.quality
+    if q is not None:
+        target = x + q.step_to_local_optimum
         beyond = [a for a, t, b, v in zip(AXES, target, bound, x)
                   if abs(t) > b and a not in at_bound]
         if beyond:
@@ -605,9 +605,9 @@ def reliability(result: "CalibrationResult") -> dict:
     # frame's gradient also carries its Hessian's difference from the mean times that offset
     # (z 13.6 cm for a KITTI result 2.2 cm off). The quality report's without the evidence.
     iv = ev.get("intervals") or {}
-    se = {a: v for a, v in (iv.get("jackknife_se") or q.get("jackknife_se") or {}).items()
-          if v is not None}
-    units = iv.get("units") or q.get("units") or {}
+    own = {} if q is None else dict(zip(AXES, q.jackknife_se * TO_REPORT))
+    se = {a: v for a, v in (iv.get("jackknife_se") or own).items() if v is not None}
+    units = iv.get("units") or dict(zip(AXES, UNITS))
     se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
                  default=None)
     se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
