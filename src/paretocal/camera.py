@@ -106,7 +106,7 @@ class Camera:
     width: int
     height: int
     model: str = "pinhole"
-    D: tuple = None
+    D: tuple | None = None
     xi: float = 0.0
     mount: np.ndarray | None = field(default=None, repr=False)
     r_limit: float = field(init=False, repr=False)
@@ -208,7 +208,7 @@ class Camera:
     def to_dict(self) -> dict:
         """JSON-ready description: ``model``, ``K``, ``D``, ``xi``, ``width``, ``height``
         (and ``mount`` when set)."""
-        d = {"model": self.model, "K": self.K.tolist(), "D": list(self.D), "xi": self.xi,
+        d = {"model": self.model, "K": self.K.tolist(), "D": list(self.D or ()), "xi": self.xi,
              "width": self.width, "height": self.height}
         if self.mount is not None:
             d["mount"] = self.mount.tolist()
@@ -517,14 +517,14 @@ def _monotonic_limit(model: str, c: np.ndarray) -> float:
     """
     if model == "fisheye":
         k1, k2, k3, k4 = c[:4]
-        s = _smallest_positive_root([1.0, 3 * k1, 5 * k2, 7 * k3, 9 * k4])
+        s = _smallest_positive_root(np.array([1.0, 3 * k1, 5 * k2, 7 * k3, 9 * k4]))
         return float(min(np.sqrt(s), np.pi))
     k1, k2, k3, k4, k5, k6 = c[0], c[1], c[4], c[5], c[6], c[7]
     num = np.array([1.0, k1, k2, k3])
     den = np.array([1.0, k4, k5, k6])
     # d/dr [r num(s) / den(s)] has the sign of (num + 2 s num') den - 2 s num den'.
     a = npoly.polymul([1.0, 3 * k1, 5 * k2, 7 * k3], den)
-    b = npoly.polymul(npoly.polymul([0.0, 2.0], num), npoly.polyder(den))
+    b: np.ndarray = npoly.polymul(npoly.polymul([0.0, 2.0], num), npoly.polyder(den))
     s = min(_smallest_positive_root(npoly.polysub(a, b)), _smallest_positive_root(den))
     return float(np.sqrt(s))
 

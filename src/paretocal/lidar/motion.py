@@ -41,13 +41,14 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from ..geometry import transform_points
 from .trajectory import Motion, Twist, check_cloud, deskew, se3_log, sweep_centre
-from .registration import (PairFit, coarse_translation, conditioning, kd_tree, neighbours,
-                           plane_target, prepare_levels, register_levels)
+from .registration import (PairFit, PlaneTarget, coarse_translation, conditioning, kd_tree,
+                           neighbours, plane_target, prepare_levels, register_levels)
 
 log = logging.getLogger(__name__)
 
@@ -186,8 +187,9 @@ class MotionEstimate:
 
 
 
-def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]], ref_times: Sequence[float],
-                   motions: Sequence[Motion], pair_poses: np.ndarray, *, sample: int = 20000,
+def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]],
+                   ref_times: Sequence[float] | np.ndarray, motions: Sequence[Motion],
+                   pair_poses: np.ndarray, *, sample: int = 20000,
                    rng: np.random.Generator | int | None = 0) -> np.ndarray:
     """How well consecutive clouds overlap: median nearest-neighbour distance per pair (m).
 
@@ -217,7 +219,7 @@ def pair_residuals(clouds: Sequence[tuple[np.ndarray, np.ndarray]], ref_times: S
     for k in range(len(clouds)):
         xyz, t = check_cloud(*clouds[k])
         pts = deskew(xyz, t, ref_times[k], motions[k])
-        if k > 0:
+        if prev is not None:                  # from k = 1 on: cloud k - 1's tree
             pick = rng.choice(len(pts), size=min(sample, len(pts)), replace=False)
             d, _ = prev.query(transform_points(pair_poses[k - 1], pts[pick]), k=1)
             out[k - 1] = float(np.median(d))
@@ -279,8 +281,8 @@ def estimate_motion(  # noqa: PLR0913 - keyword-only options, each documented
     if len(clouds) < 2:
         raise ValueError("motion estimation needs at least two consecutive clouds")
     rng = np.random.default_rng(seed)
-    up = np.asarray(up, dtype=np.float64)
-    up = up / np.linalg.norm(up)
+    up_axis = np.asarray(up, dtype=np.float64)
+    up_axis = up_axis / np.linalg.norm(up_axis)
     cl = [check_cloud(*c) for c in clouds]
     K = len(cl)
     if ref_times is None:
@@ -319,26 +321,31 @@ def estimate_motion(  # noqa: PLR0913 - keyword-only options, each documented
     converged = False
     passes = 0
     for passes in range(1, max_passes + 1):
-        src_pts = [[deskew(xyz[i], t[i], tau[k], twists[k]) if passes == 1 or lv == 2 else None
-                    for lv, (i, _) in enumerate(levels[k])] for k, (xyz, t) in enumerate(cl)]
+        src_pts: list[list[np.ndarray | None]] = [
+            [deskew(xyz[i], t[i], tau[k], twists[k]) if passes == 1 or lv == 2 else None
+             for lv, (i, _) in enumerate(levels[k])] for k, (xyz, t) in enumerate(cl)]
         # After the first pass the pair poses move by little more than the change of the de-skew,
         # well inside the finest gate: the coarse levels are skipped.
         use = slice(0, 3) if passes == 1 else slice(2, 3)
         for k in range(K - 1):
-            tgt = [None] * 3
+            # Levels this pass skips stay None (the casts say what the pass structure holds).
+            tgt: list[PlaneTarget | None] = [None] * 3
             for lv in range(3)[use]:
-                tgt[lv] = plane_target(src_pts[k][lv], levels[k][lv][1])
+                tgt[lv] = plane_target(cast(np.ndarray, src_pts[k][lv]), levels[k][lv][1])
             if np.isfinite(poses[k]).all():
                 T0 = poses[k]
             elif k > 0 and np.isfinite(pair_xi[k - 1]).all():
                 # Constant velocity from the previous pair.
                 T0 = Twist(pair_xi[k - 1, :3], pair_xi[k - 1, 3:]).pose(dtau[k])
             else:
-                if tgt[0] is None:
-                    tgt[0] = plane_target(src_pts[k][0], levels[k][0][1])
-                T0 = coarse_translation(src_pts[k + 1][0], tgt[0], np.eye(4),
-                                         max_speed * dtau[k], 4.0 * v_med, up)
-            fit = register_levels(src_pts[k + 1][use], tgt[use], T0, gates[use], med_range)
+                coarse = tgt[0]
+                if coarse is None:
+                    coarse = tgt[0] = plane_target(cast(np.ndarray, src_pts[k][0]),
+                                                   levels[k][0][1])
+                T0 = coarse_translation(cast(np.ndarray, src_pts[k + 1][0]), coarse, np.eye(4),
+                                         max_speed * dtau[k], 4.0 * v_med, up_axis)
+            fit = register_levels(cast(list[np.ndarray], src_pts[k + 1][use]),
+                                  cast(list[PlaneTarget], tgt[use]), T0, gates[use], med_range)
             fits[k] = fit
             if fit is None:
                 log.warning("motion: registration of clouds %d and %d failed", k, k + 1)
@@ -494,6 +501,7 @@ def estimate_time_offset(clouds: Sequence[tuple[np.ndarray, np.ndarray]],
     cl = [check_cloud(*c) for c in clouds]
     if not cl:
         raise ValueError("no clouds")
+    motions: list[Motion]
     if isinstance(motion, MotionEstimate):
         motions = [motion.frame_motion(k) for k in range(len(cl))]
     elif isinstance(motion, Sequence):

@@ -406,8 +406,8 @@ def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None 
     for name, a in (("source", src), ("target", tgt)):
         if a.ndim != 2 or a.shape[1] != 3 or len(a) < 10:
             raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {a.shape}")
-    up = np.asarray(up, dtype=np.float64)
-    up = up / np.linalg.norm(up)
+    up_axis = np.asarray(up, dtype=np.float64)
+    up_axis = up_axis / np.linalg.norm(up_axis)
     vs, ls = prepare_levels(src, points, rng)
     vt, lt = prepare_levels(tgt, points, rng)
     v = 0.5 * (vs + vt)
@@ -417,7 +417,8 @@ def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None 
     if T0 is None:
         if not refine:
             raise ValueError("register_pair: refine=False needs T0")
-        T0 = coarse_translation(sources[0], targets[0], np.eye(4), max_translation, 4.0 * v, up)
+        T0 = coarse_translation(sources[0], targets[0], np.eye(4), max_translation, 4.0 * v,
+                                up_axis)
     T = np.asarray(T0, dtype=np.float64)
     its = 0
     if refine:

@@ -444,7 +444,7 @@ def _tilt_search(comb: np.ndarray, origin: np.ndarray, R: np.ndarray) -> np.ndar
         return R
     found.sort(key=lambda v: -v[0])
     # The sharpest maxima more than 1.5 steps apart (tiles share their borders).
-    cand = []
+    cand: list[np.ndarray] = []
     for _score, Rc in found:
         if all(np.degrees(np.arccos(np.clip(Rc[:, 2] @ Ro[:, 2], -1.0, 1.0))) > 1.5 * step
                for Ro in cand):

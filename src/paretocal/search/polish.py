@@ -51,7 +51,7 @@ def polish(chamfer, X: np.ndarray, step: np.ndarray = DEFAULT_STEP,
             break
         cand = np.repeat(X[idx, None, :], 12, axis=1)              # (a, 12, 7)
         cand[:, :, :6] += dirs[None] * scale[idx, None, :]
-        if lower is not None:
+        if lower is not None and upper is not None:
             cand[:, :, :6] = np.clip(cand[:, :, :6], lower[:6], upper[:6])
         fc = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(len(idx), 12)
         evals += fc.size
@@ -196,7 +196,7 @@ def newton_polish(chamfer, X: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP, iters
         step = newton_step(g, H, h, max_step, eig_floor)
         cand = np.repeat(X[idx, None, :], len(alphas), axis=1)
         cand[:, :, :6] += alphas[None, :, None] * step[:, None, :]
-        if lower is not None:
+        if lower is not None and upper is not None:
             cand[:, :, :6] = np.clip(cand[:, :, :6], lower[:6], upper[:6])
         fc = np.asarray(chamfer(cand.reshape(-1, 7)), dtype=np.float64).reshape(len(idx), -1)
         evals += fc.size

@@ -94,7 +94,7 @@ def grid_seeds(  # noqa: PLR0913 - the grid, then keyword-only options
     order = np.argsort(fP)
     P, fP = P[order], fP[order]
     # Drop near-duplicates (within 0.5 deg and 5 cm of a better seed).
-    chosen = []
+    chosen: list[int] = []
     for i in range(len(P)):
         if all(np.abs(P[i, 3:6] - P[j, 3:6]).max() > 0.5 or
                np.abs(P[i, :3] - P[j, :3]).max() > 0.05 for j in chosen):
