@@ -100,7 +100,7 @@ import yaml
 from paretocal.geometry import check_rigid, decalibrate, invert, pose_error
 from paretocal.io import detect_source, load_frames, write_extrinsic
 from paretocal.io.exports import kitti_velo_to_cam_text
-from paretocal.io.readers import read_mapping
+from paretocal.io.text import read_mapping
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))

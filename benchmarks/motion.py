@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paretocal.io.readers import read_cloud
+from paretocal.io.clouds import read_cloud
 from paretocal.lidar.motion import estimate_motion
 
 DATA = Path(os.environ.get("PARETOCAL_DATA",

@@ -9,7 +9,7 @@ import yaml
 from paretocal.camera import project
 from paretocal.geometry import correction_matrix, invert
 from paretocal.io import detect_source, load_frames
-from paretocal.io.readers import read_mapping
+from paretocal.io.text import read_mapping
 
 from .helpers import load_benchmark
 

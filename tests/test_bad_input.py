@@ -1121,7 +1121,7 @@ def _pcd(header: str, data: bytes = b"") -> bytes:
 def test_cloud_headers_claiming_too_much_are_refused(tmp_path, name, content, expect):
     """Refused from the header, before anything of the claimed size is allocated (a count of
     10**8 per point used to make 10**8 columns; 10**12 PLY lines made numpy reserve them)."""
-    from paretocal.io.readers import read_cloud
+    from paretocal.io.clouds import read_cloud
 
     path = tmp_path / name
     path.write_bytes(content)
@@ -1199,7 +1199,7 @@ def test_image_header_sizes_match_the_decoder():
     from PIL import Image
 
     from paretocal.io.bags import compressed_image
-    from paretocal.io.readers import image_header_size
+    from paretocal.io.images import image_header_size
 
     img = np.random.default_rng(1).integers(0, 255, (37, 53, 3), np.uint8)
     files = [cv2.imencode(ext, img)[1].tobytes() for ext in (".png", ".jpg", ".bmp")]
@@ -1275,7 +1275,7 @@ def test_a_manifest_yaml_error_quotes_no_line(tmp_path):
 
 
 def test_yaml_merge_keys_may_be_overridden():
-    from paretocal.io.readers import load_yaml
+    from paretocal.io.text import load_yaml
 
     doc = load_yaml("base: &b {pop: 16, gens: 3}\nsearch:\n  <<: *b\n  gens: 5\n", "x")
     assert doc["search"] == {"pop": 16, "gens": 5}

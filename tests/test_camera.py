@@ -6,7 +6,7 @@ import pytest
 
 from paretocal.camera import MEI, N_PARAMS, Camera, in_image, project
 from paretocal.io.layouts import detect_source
-from paretocal.io.readers import read_kitti_calib
+from paretocal.io.text import read_kitti_calib
 
 
 def _kitti_uv(P, R_rect, Tr, pts):

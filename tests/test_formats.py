@@ -24,7 +24,8 @@ from paretocal.io import detect_source, load_frames, read_extrinsic, write_extri
 from paretocal.io.exports import (INVERSE_FILE, KITTI_FILE, TF_FILE, kitti_rect_of,
                                   read_extrinsic_inverse, read_kitti_velo_to_cam, read_tf_static,
                                   write_exports)
-from paretocal.io.readers import read_kitti_calib, read_points
+from paretocal.io.text import read_kitti_calib
+from paretocal.io.clouds import read_points
 from paretocal.report.results import write_run
 
 # --- writers used by the tests (independent of the readers under test) ---------------------------

@@ -30,7 +30,7 @@ from paretocal.errors import InputError, ParetocalError, SettingsError
 from paretocal.geometry import (apply_correction, correction_matrix, correction_params, invert,
                                 pose_error, rotation_angle_deg, transform_points)
 from paretocal.io import detect_source, read_extrinsic
-from paretocal.io.readers import read_points
+from paretocal.io.clouds import read_points
 
 #: More examples for a deeper search: PARETOCAL_FUZZ_EXAMPLES=2000 pytest tests/test_fuzz.py
 N = int(os.environ.get("PARETOCAL_FUZZ_EXAMPLES", "40"))

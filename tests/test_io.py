@@ -7,7 +7,8 @@ import pytest
 from paretocal.camera import project
 from paretocal.errors import InputError, SettingsError
 from paretocal.io import detect_source, load_frames, read_extrinsic, select_frames, write_extrinsic
-from paretocal.io.readers import read_image, read_points
+from paretocal.io.images import read_image
+from paretocal.io.clouds import read_points
 
 from .helpers import write_generic
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from paretocal.io.readers import read_cloud
+from paretocal.io.clouds import read_cloud
 from paretocal.lidar import (
     PoseTrajectory,
     Twist,

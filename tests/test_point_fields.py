@@ -1,4 +1,4 @@
-"""Per-point fields of point cloud files (:func:`paretocal.io.readers.read_cloud`): intensity
+"""Per-point fields of point cloud files (:func:`paretocal.io.clouds.read_cloud`): intensity
 aliases, ring numbers, per-point time and its unit, ``.npy`` record arrays and the declared
 layouts of ``.bin`` files. Test files are written at run time from the KITTI sample or synthetic
 arrays by the writers of tests/test_formats.py."""
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from paretocal.errors import InputError
-from paretocal.io.readers import (BIN_LAYOUTS, INTENSITY_FIELDS, RING_FIELDS, TIME_FIELDS,
-                                  read_cloud, read_points)
+from paretocal.io.clouds import (BIN_LAYOUTS, INTENSITY_FIELDS, RING_FIELDS, TIME_FIELDS, read_cloud,
+                                 read_points)
 
 from .test_formats import err_for, pcd_bytes, ply_bytes, xyzi_cols
 

@@ -102,7 +102,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
     else:
         import yaml
 
-        from .io.readers import load_yaml, yaml_error
+        from .io.text import load_yaml, yaml_error
 
         try:
             doc = load_yaml(text, path)      # refuses alias bombs and duplicate keys, naming it
@@ -151,7 +151,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
 def _manifest_text(path: Path) -> str:
     """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
     before a parser reports it as something else."""
-    from .io.readers import MAX_TEXT_BYTES
+    from .io.text import MAX_TEXT_BYTES
 
     try:
         size = path.stat().st_size
@@ -230,7 +230,7 @@ def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
     whether it is checked and drawn. A record is done only for the same fingerprint."""
     from .search.checkpoint import fingerprint
 
-    from .io.readers import MAX_TEXT_BYTES
+    from .io.text import MAX_TEXT_BYTES
 
     init = None
     if entry.init:

@@ -756,7 +756,7 @@ def extract(
 
 def _calib_entries(path: Path) -> dict:
     """The camera (and T_cam_lidar) of a --calib file, its mask made absolute."""
-    from .io.readers import read_mapping
+    from .io.text import read_mapping
 
     data = read_mapping(path)
     cam = data.get("camera")

@@ -481,7 +481,7 @@ def states_init_error(path: str | Path | None) -> bool:
     """Whether the config file ``path`` names ``search.init_error_deg`` or ``init_error_m``
     (then the user set it, even to the default values: a dataset's own does not replace it,
     see :func:`dataset_settings`)."""
-    from .io.readers import read_mapping
+    from .io.text import read_mapping
 
     if path is None:
         return False
@@ -491,7 +491,7 @@ def states_init_error(path: str | Path | None) -> bool:
 
 def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
     """Settings from a YAML/JSON config file laid out by section, over ``base``."""
-    from .io.readers import read_mapping
+    from .io.text import read_mapping
 
     if path is None:
         return base or Settings()

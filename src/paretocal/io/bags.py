@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import InputError, ParetocalError, SettingsError, first_line, quote
 from .paths import kind_of
-from .readers import check_image_size, image_header_size
+from .images import check_image_size, image_header_size
 
 log = logging.getLogger(__name__)
 
@@ -362,7 +362,7 @@ def cloud_array(msg, where: str = "cloud") -> np.ndarray:
         the fields in the message's order with their names and types (``count > 1``: a
         sub-array), in native byte order and without padding. Values are as stored: ``x, y, z``
         in the cloud's units (metres in ROS), intensity, ring and time as the driver wrote them
-        (:func:`paretocal.io.readers.read_cloud` interprets them by name).
+        (:func:`paretocal.io.clouds.read_cloud` interprets them by name).
 
     Raises
     ------

@@ -28,7 +28,7 @@ from ..errors import InputError
 from ..geometry import check_rigid, invert
 from .atomic import atomic_write_text
 from .extrinsic import quaternion_pose
-from .readers import calib_matrix, read_kitti_calib, read_mapping
+from .text import calib_matrix, read_kitti_calib, read_mapping
 
 KITTI_FILE = "calib_velo_to_cam.txt"
 TF_FILE = "tf_static.yaml"

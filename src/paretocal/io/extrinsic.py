@@ -10,7 +10,7 @@ import yaml
 from ..errors import InputError, excerpt, first_line, key_list, quote
 from ..geometry import check_rigid
 from .atomic import atomic_write_text
-from .readers import MAX_TEXT_BYTES, read_mapping
+from .text import MAX_TEXT_BYTES, read_mapping
 
 
 #: Words in TF frame names that say which frame is the LiDAR's and which the camera's.

@@ -20,8 +20,9 @@ from ..geometry import check_rigid
 from .bags import extract_hint, is_bag
 from .frame import Frame
 from .paths import kind_of, missing, not_found
-from .readers import (BIN_LAYOUTS, IMAGE_SUFFIXES, POINT_SUFFIXES, calib_matrix, decode_image,
-                      read_cloud, read_image, read_kitti_calib, read_mapping)
+from .clouds import BIN_LAYOUTS, POINT_SUFFIXES, read_cloud
+from .images import decode_image, IMAGE_SUFFIXES, read_image
+from .text import calib_matrix, read_kitti_calib, read_mapping
 
 log = logging.getLogger(__name__)
 

@@ -135,3 +135,29 @@ def open_plain(path: Path, what: str = "a plain file"):
         os.close(fd)
         raise not_plain(path, odd_kind(path) or "a special file", what)
     return os.fdopen(fd, "rb")
+
+
+def require_file(path: Path, what: str) -> None:
+    """Fail naming ``path`` when it is missing or not a regular file (a folder, a device, a
+    FIFO: it is not opened, so a FIFO cannot block the reader)."""
+    kind = kind_of(path)
+    if kind == "a regular file":
+        return
+    if kind is not None:
+        raise InputError(f"{path}: {what} expected, but this is {kind}")
+    raise InputError(not_found(path, what))
+
+
+def require_size(path: Path, limit: int, what: str) -> int:
+    """The size of the regular file ``path`` in bytes; an :class:`InputError` when it is above
+    ``limit`` (one of the limits at the top of this module), before anything is read."""
+    size = path.stat().st_size
+    if size > limit:
+        raise InputError(f"{path}: {size:,} bytes, more than the {mib(limit)} a {what} may "
+                         "hold")
+    return size
+
+
+def mib(nbytes: int) -> str:
+    """A size limit in words: ``8 MiB``, ``2 GiB``."""
+    return f"{nbytes / 2**30:g} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:g} MiB"

@@ -1,4 +1,4 @@
-"""Readers for the files a frame is made of: LiDAR sweeps, images, calibration text and YAML.
+"""Reading LiDAR sweeps: ``.pcd``, ``.ply``, ``.npy`` and headerless ``.bin`` files.
 
 Every failure raises :class:`~paretocal.errors.InputError` naming the file and what is wrong.
 
@@ -37,29 +37,22 @@ about 0.2 us.
 
 from __future__ import annotations
 
-import contextlib
 import io
-import json
 import logging
 import os
 import re
-import sys
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
-import yaml
 
 from ..errors import InputError, excerpt, first_line, is_name, key_list, quote
-from .paths import kind_of, not_found
+from .paths import mib, require_file, require_size
 
 log = logging.getLogger(__name__)
 
 POINT_SUFFIXES = (".bin", ".npy", ".pcd", ".ply")
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 #: Field names read as the intensity of a cloud (case-insensitive, first wins).
 INTENSITY_FIELDS = ("intensity", "reflectivity", "signal", "i", "reflectance")
 #: Field names read as the laser (ring) index (case-insensitive, first wins).
@@ -71,25 +64,11 @@ PLAUSIBLE_SWEEP_S = (1e-3, 1.0)
 #: How a user declares the layout of .bin files (the text put into error messages).
 DECLARE_LAYOUT = "points: {{layout: {}}} in calib.yaml"
 
-# --- limits ---------------------------------------------------------------------------------------
-# What an input file may hold, or its header claim, checked before anything is allocated for it
-# (a stat and a header read: the normal path costs nothing measurable). Each is far beyond any
+# What a file may hold, or its header claim, is checked before anything is allocated for it (a
+# stat and a header read: the normal path costs nothing measurable). Each limit is far beyond any
 # real sensor or file, so that only a corrupt or hostile file meets it; docs/bad_input.md lists
 # them with their messages.
 
-#: Bytes of a text input: calib.yaml, camera_info, --config, --init, a batch manifest, KITTI
-#: calibration text. These hold a few kilobytes; a manifest about 100 bytes per entry, so 8 MiB
-#: is some 80,000 entries. PyYAML parses 0.3-1 MB per second on a busy machine: the largest
-#: file accepted takes up to half a minute, where a 200 MB file would take over ten minutes.
-MAX_TEXT_BYTES = 8 << 20
-_TEXT = "YAML, JSON, CSV or calibration text file"
-#: Most values (scalars, lists and mappings) a YAML file may hold once its aliases are expanded.
-#: A value costs at most about 100 bytes as a Python object (8 as a number in numpy), so one
-#: file can make the readers build at most about 100 MB; the files paretocal reads (calib.yaml,
-#: camera_info, --config, --init) hold a few hundred values. Aliases themselves are allowed:
-#: only their expansion is bounded ("billion laughs": nine nested anchors of nine aliases each
-#: are 340 bytes of text and 387 million values, which numpy turns into 2.9 GB).
-MAX_YAML_VALUES = 1_000_000
 #: Points in one cloud file, by its header (a .npy's shape, a PCD's POINTS, a PLY's vertex
 #: count) or size. The densest LiDARs give a few hundred thousand points a sweep (128 beams at
 #: 2048 columns: 262,144); 2**25 (33.5 million) leaves room for sweeps accumulated into one file.
@@ -101,14 +80,6 @@ MAX_CLOUD_BYTES = MAX_CLOUD_POINTS * 64
 #: Values per point in a PCD header (the sum of its COUNTs), checked before a column is made
 #: for each: a LiDAR point has under a dozen; PCL's widest point type (ShapeContext1980) 1989.
 MAX_POINT_VALUES = 4096
-#: Pixels of an image (width x height), read from the PNG or JPEG header before decoding. The
-#: largest camera sensors have about 150 million pixels, automotive ones 2 to 8 million; a
-#: larger header (a decompression bomb: a 20000 x 20000 PNG of 1 MB decodes to 1.2 GB) is
-#: refused. 2**28 = 268 million, e.g. 16384 x 16384.
-MAX_IMAGE_PIXELS = 1 << 28
-#: Bytes of an image file: an uncompressed image of MAX_IMAGE_PIXELS 16-bit RGBA pixels
-#: (8 bytes each) is the largest a camera image can be. 2 GiB.
-MAX_IMAGE_BYTES = MAX_IMAGE_PIXELS * 8
 
 _TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
 _UNIT_WORDS = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
@@ -255,11 +226,11 @@ def read_cloud(path: Path, bin_layout: str | None = None) -> Cloud:
     """
     path = Path(path)
     layout = _layout_name(path, bin_layout)
-    _require_file(path, "point cloud file")
+    require_file(path, "point cloud file")
     suffix = path.suffix.lower()
     notes: list[str] = []
     try:
-        _require_size(path, MAX_CLOUD_BYTES, "point cloud file")
+        require_size(path, MAX_CLOUD_BYTES, "point cloud file")
         if suffix == ".bin":
             cols, used = _read_bin(path, path.read_bytes(), layout)
         elif suffix == ".npy":
@@ -472,7 +443,7 @@ def _check_points(path: Path, n: int, nbytes: int, source: str) -> None:
                          "a point cloud file may hold")
     if nbytes > MAX_CLOUD_BYTES:
         raise InputError(f"{path}: {nbytes:,} bytes of point data by {source}, more than the "
-                         f"{_mib(MAX_CLOUD_BYTES)} a point cloud file may hold")
+                         f"{mib(MAX_CLOUD_BYTES)} a point cloud file may hold")
 
 
 def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
@@ -891,363 +862,3 @@ def _ply_ascii(path: Path, body: bytes, elements: list[list], iv: int) -> dict[s
                          f"{table.shape[1] if table.size else 0} values; the header says "
                          f"{n} of {len(props)} (truncated or wrong header)")
     return {p: _ascii_column(table[:, j], t) for j, (p, t) in enumerate(props)}
-
-
-def _require_file(path: Path, what: str) -> None:
-    """Fail naming ``path`` when it is missing or not a regular file (a folder, a device, a
-    FIFO: it is not opened, so a FIFO cannot block the reader)."""
-    kind = kind_of(path)
-    if kind == "a regular file":
-        return
-    if kind is not None:
-        raise InputError(f"{path}: {what} expected, but this is {kind}")
-    raise InputError(not_found(path, what))
-
-
-def _require_size(path: Path, limit: int, what: str) -> int:
-    """The size of the regular file ``path`` in bytes; an :class:`InputError` when it is above
-    ``limit`` (one of the limits at the top of this module), before anything is read."""
-    size = path.stat().st_size
-    if size > limit:
-        raise InputError(f"{path}: {size:,} bytes, more than the {_mib(limit)} a {what} may "
-                         "hold")
-    return size
-
-
-def _mib(nbytes: int) -> str:
-    """A size limit in words: ``8 MiB``, ``2 GiB``."""
-    return f"{nbytes / 2**30:g} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:g} MiB"
-
-
-@contextlib.contextmanager
-def _native_stderr(sink: list[str]):
-    """Collect what native code (libpng, libjpeg, OpenCV's log) writes to file descriptor 2.
-
-    Decoders print their complaints straight to the process's stderr, which would add stray
-    lines to the CLI's one-line error; the text is appended to ``sink`` instead, for the
-    error message. Not thread-safe (fd 2 is process-wide): used around short decoder calls.
-    """
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):
-        yield                                   # no usable fd 2: let the library print
-        return
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            sink.append(tmp.read(4096).decode("utf-8", "replace"))
-
-
-def _decoder_note(texts: list[str]) -> str:
-    """The last line a decoder printed, shortened, for an error message ('' if none)."""
-    lines = [ln.strip() for t in texts for ln in t.splitlines() if ln.strip()]
-    if not lines:
-        return ""
-    # OpenCV's log lines: "[ WARN:0@0.01] global grfmt_png.cpp:793 readFromStreamOrBuffer ..."
-    last = re.sub(r"^\[\s*(WARN|ERROR|INFO)[^\]]*\]\s*(global\s+\S+\s+)?(\w+\s+)?", "",
-                  lines[-1])
-    last = re.sub(r"\w+\('[^']*'\):\s*", "", last).split(" OpenCV(")[0].rstrip(" :")
-    return f": {last[:160]}" if last else ""
-
-
-_PNG = b"\x89PNG\r\n\x1a\n"
-#: JPEG start-of-frame markers (baseline, progressive, lossless, arithmetic): they hold the size.
-_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-
-
-def image_header_size(fh) -> tuple[int, int] | None:
-    """``(width, height)`` in pixels from the header of the PNG or JPEG data in the binary
-    file object ``fh`` (read from its current position), without decoding; None for other
-    formats or a header this cannot read (the decoder then judges the data)."""
-    start = fh.tell()
-    head = fh.read(24)
-    if head[:8] == _PNG and head[12:16] == b"IHDR":
-        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-    if head[:3] != b"\xff\xd8\xff":
-        return None
-    pos = start + 2
-    for _ in range(1024):               # the segments before the frame header (APPn, DQT, ...)
-        fh.seek(pos)
-        seg = fh.read(9)
-        if len(seg) < 4 or seg[0] != 0xFF:
-            return None
-        marker = seg[1]
-        if marker == 0xFF or 0xD0 <= marker <= 0xD7 or marker == 0x01:
-            pos += 1 if marker == 0xFF else 2        # a fill byte, or a marker without length
-            continue
-        if marker in _JPEG_SOF:
-            h, w = int.from_bytes(seg[5:7], "big"), int.from_bytes(seg[7:9], "big")
-            return (w, h) if len(seg) == 9 and w and h else None
-        if marker in (0xD9, 0xDA):                  # end of image, or scan data: no frame size
-            return None
-        pos += 2 + int.from_bytes(seg[2:4], "big")
-    return None
-
-
-def check_image_size(where, size: tuple[int, int] | None) -> None:
-    """Refuse an image whose header (``size``: width, height from :func:`image_header_size`)
-    says more than :data:`MAX_IMAGE_PIXELS`, before it is decoded; ``where`` names it."""
-    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
-        raise InputError(f"{where}: the image header says {size[0]}x{size[1]} pixels, more than "
-                         f"the {MAX_IMAGE_PIXELS:,} an image may have")
-
-
-def decode_image(path: Path) -> np.ndarray:
-    """The image at ``path`` as OpenCV decodes it (any depth and channel count).
-
-    Raises :class:`InputError` naming the file when it is missing, unreadable, empty (0 bytes)
-    or cannot be decoded; what the decoder printed is put in the message, not on stderr.
-    """
-    path = Path(path)
-    _require_file(path, "image file")
-    try:
-        _require_size(path, MAX_IMAGE_BYTES, "image file")
-        with open(path, "rb") as fh:
-            check_image_size(path, image_header_size(fh))
-            fh.seek(0)
-            raw = np.fromfile(fh, dtype=np.uint8)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the image ({exc.strerror or exc})") from None
-    if raw.size == 0:
-        raise InputError(f"{path}: the image file is empty (0 bytes)")
-    notes: list[str] = []
-    with _native_stderr(notes):
-        try:
-            img = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
-        except cv2.error:
-            img = None
-    if img is None or img.size == 0:
-        raise InputError(f"{path}: cannot decode the image (corrupt, truncated or not an "
-                         f"image{_decoder_note(notes)})")
-    if _decoder_note(notes):
-        log.warning("%s: the image decoder reported a problem%s", path, _decoder_note(notes))
-    return img
-
-
-#: Share of the pixels (per tail) that 16-bit and float images may hold beyond their black and
-#: white points: a hot or dead pixel, or a cluster of up to 0.1 % of the frame (466 pixels of a
-#: 1242x375 image), does not set the scale; clipping so few to black or white loses no edge that
-#: matters.
-STRETCH_CLIP = 0.001
-
-
-def _to_8bit(img: np.ndarray) -> np.ndarray:
-    """A 16-bit or float image as uint8 for edge detection, its 0.1th to 99.9th percentile
-    (:data:`STRETCH_CLIP`, over the finite values of every channel) stretched to 0..255.
-
-    The extremes would let one hot pixel decide: a 12-bit frame stored in 16 bits with one
-    pixel at 65535 turns black (every other value below 16 of 255) and shows no edges.
-    """
-    values = img[np.isfinite(img)] if img.dtype.kind == "f" else img.ravel()
-    if values.size == 0:
-        return np.zeros(img.shape, np.uint8)
-    lo, hi = np.percentile(values, [100 * STRETCH_CLIP, 100 * (1 - STRETCH_CLIP)])
-    if not hi > lo:
-        lo, hi = float(values.min()), float(values.max())
-    if not hi > lo:
-        return np.zeros(img.shape, np.uint8)
-    scaled = (np.nan_to_num(img.astype(np.float32), nan=lo) - lo) * (255.0 / (hi - lo))
-    return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
-
-
-def read_image(path: Path) -> np.ndarray:
-    """Read an image as (H, W, 3) uint8 BGR; grey images are expanded to three channels."""
-    img = decode_image(Path(path))
-    if img.dtype != np.uint8:
-        img = _to_8bit(img)
-    if img.ndim == 2:
-        img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-    elif img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-    elif img.shape[2] != 3:
-        raise InputError(f"{path}: image has {img.shape[2]} channels; expected 1, 3 or 4")
-    return img
-
-
-def read_kitti_calib(path: Path) -> dict[str, np.ndarray]:
-    """Parse a KITTI calibration text file (``key: numbers`` per line) into float64 arrays.
-
-    Lines whose values are not numbers (such as ``calib_time``) are skipped.
-    """
-    path = Path(path)
-    _require_file(path, "calibration file")
-    out: dict[str, np.ndarray] = {}
-    try:
-        _require_size(path, MAX_TEXT_BYTES, _TEXT)
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text file (not UTF-8); expected a KITTI calibration "
-                         "file") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read calibration file ({exc.strerror or exc})") from None
-    for line in text.splitlines():
-        if ":" not in line:
-            continue
-        key, _, rest = line.partition(":")
-        try:
-            out[key.strip()] = np.array([float(v) for v in rest.split()], dtype=np.float64)
-        except ValueError:
-            continue
-    return out
-
-
-def calib_matrix(calib: dict[str, np.ndarray], key: str, shape: tuple[int, int],
-                 path: Path) -> np.ndarray:
-    """Fetch ``key`` from a parsed KITTI calibration and reshape it, or fail naming the file."""
-    if key not in calib:
-        raise InputError(f"{path}: missing key {key!r}")
-    v = calib[key]
-    if v.size != shape[0] * shape[1]:
-        raise InputError(f"{path}: {key!r} has {v.size} values, expected "
-                         f"{shape[0] * shape[1]} ({shape[0]}x{shape[1]})")
-    m = v.reshape(shape)
-    if not np.all(np.isfinite(m)):
-        raise InputError(f"{path}: {key!r} contains NaN or infinite values")
-    return m
-
-
-class _AliasBomb(Exception):
-    """A YAML document whose aliases expand beyond :data:`MAX_YAML_VALUES`, or refer to
-    themselves."""
-
-
-def _expanded_size(node, sizes: dict, open_: set) -> int:
-    """Values in ``node`` with every alias expanded (memoised per node, so linear in the
-    document's own nodes however often they are referred to)."""
-    key = id(node)
-    if key in sizes:
-        return sizes[key]
-    if key in open_:
-        raise _AliasBomb("a YAML alias refers to a structure that contains it (a recursive "
-                         "document); write the values out instead")
-    open_.add(key)
-    n = 1
-    if isinstance(node, yaml.SequenceNode):
-        n += sum(_expanded_size(v, sizes, open_) for v in node.value)
-    elif isinstance(node, yaml.MappingNode):
-        n += sum(_expanded_size(k, sizes, open_) + _expanded_size(v, sizes, open_)
-                 for k, v in node.value)
-    open_.discard(key)
-    sizes[key] = n
-    if n > MAX_YAML_VALUES:
-        raise _AliasBomb(f"its YAML aliases expand it to more than {MAX_YAML_VALUES:,} values "
-                         "(an alias bomb?); write the values out instead of repeating anchors")
-    return n
-
-
-class _DuplicateKey(Exception):
-    """A mapping that holds a key twice: ``key``, and the lines (1-based) of both, or None."""
-
-    def __init__(self, key, lines=None):
-        super().__init__(key)
-        self.key, self.lines = key, lines
-
-    def error(self, path) -> InputError:
-        shown = quote(self.key) if is_name(self.key) else "a key that is not a plain name"
-        a, b = self.lines or (None, None)
-        where = "" if a is None else f" (line {a})" if a == b else f" (lines {a} and {b})"
-        return InputError(f"{path}: {shown} is given twice in one mapping{where}; a key may "
-                          "appear once (the second would silently replace the first)")
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses a mapping holding a key twice, at any depth (PyYAML
-    keeps the last one silently). Keys brought in by a merge (``<<: *anchor``) may be
-    overridden: that is what a merge is for."""
-
-    def construct_mapping(self, node, deep=False):
-        seen: dict = {}
-        for key_node, _ in node.value:
-            if key_node.tag == "tag:yaml.org,2002:merge":
-                continue
-            key = self.construct_object(key_node, deep=True)
-            line = key_node.start_mark.line + 1
-            try:
-                if key in seen:
-                    raise _DuplicateKey(key, (seen[key], line))
-                seen[key] = line
-            except TypeError:
-                continue                                # unhashable: the constructor says so
-        return super().construct_mapping(node, deep)
-
-
-def _unique_pairs(pairs: list) -> dict:
-    """``object_pairs_hook`` of :func:`json.loads` that refuses a key given twice."""
-    seen = set()
-    for key, _ in pairs:
-        if key in seen:
-            raise _DuplicateKey(key)
-        seen.add(key)
-    return dict(pairs)
-
-
-def load_yaml(text: str, path: Path | str):
-    """``yaml.safe_load`` of ``text`` that refuses what would be read wrongly or slowly,
-    naming ``path``.
-
-    :class:`InputError` is raised, before anything is built, for text longer than
-    :data:`MAX_TEXT_BYTES` or anchors and aliases that expand beyond :data:`MAX_YAML_VALUES`
-    values (or refer to themselves); and for a mapping that holds a key twice (at any depth).
-    YAML syntax errors propagate as :class:`yaml.YAMLError` (:func:`yaml_error` words them).
-    """
-    if len(text) > MAX_TEXT_BYTES:
-        raise InputError(f"{path}: {len(text):,} characters, more than the "
-                         f"{_mib(MAX_TEXT_BYTES)} a {_TEXT} may hold")
-    loader = _UniqueKeyLoader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            return None
-        try:
-            _expanded_size(node, {}, set())
-            return loader.construct_document(node)
-        except _AliasBomb as exc:
-            raise InputError(f"{path}: {exc}") from None
-        except _DuplicateKey as exc:
-            raise exc.error(path) from None
-    finally:
-        loader.dispose()
-
-
-def yaml_error(path: Path | str, exc: yaml.YAMLError) -> InputError:
-    """The one-line error for a YAML syntax error in ``path``: the line and column and the
-    parser's words, never the lines of the file it quotes."""
-    if isinstance(exc, yaml.MarkedYAMLError):
-        mark = exc.problem_mark
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-        return InputError(f"{path}: not valid YAML "
-                          f"({where}{excerpt(exc.problem or exc.context or 'syntax error')})")
-    return InputError(f"{path}: not valid YAML ({first_line(exc)})")
-
-
-def read_mapping(path: Path) -> dict:
-    """Read a YAML or JSON file whose top level is a mapping."""
-    path = Path(path)
-    _require_file(path, "file")
-    try:
-        _require_size(path, MAX_TEXT_BYTES, _TEXT)
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text file (not UTF-8); expected YAML or JSON") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
-    try:
-        data = (json.loads(text, object_pairs_hook=_unique_pairs) if kind == "JSON"
-                else load_yaml(text, path))
-    except _DuplicateKey as exc:
-        raise exc.error(path) from None
-    except yaml.MarkedYAMLError as exc:
-        raise yaml_error(path, exc) from None
-    except (ValueError, yaml.YAMLError, RecursionError) as exc:
-        raise InputError(f"{path}: not valid {kind} ({first_line(exc)})") from None
-    if not isinstance(data, dict):
-        got = "an empty file" if data is None else f"a {type(data).__name__}"
-        raise InputError(f"{path}: expected a mapping (key: value) at the top level, got {got}")
-    return data
