@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 from paretocal import Settings
-from paretocal.batch import run_batch
+from paretocal.apps.batch import run_batch
 from paretocal.geometry import decalibrate
 from paretocal.io import detect_source, write_extrinsic
 

@@ -1050,7 +1050,7 @@ def test_a_batch_reason_is_one_bounded_line(tmp_path, rig, monkeypatch):
     excerpt as on the command line, and any exception's message on one bounded line."""
     import pyarrow.parquet as pq
 
-    from paretocal import batch
+    from paretocal.apps import batch
     from paretocal.errors import MESSAGE_CHARS
 
     init = tmp_path / "shadow"
@@ -1253,7 +1253,7 @@ def test_a_key_given_twice_is_refused(capfd, tmp_path, rig, where, text, expect)
 
 
 def test_a_manifest_key_given_twice_is_refused(tmp_path):
-    from paretocal.batch import read_manifest
+    from paretocal.apps.batch import read_manifest
 
     path = tmp_path / "m.yaml"
     path.write_text("- {id: a, source: x, source: y}\n")
@@ -1264,7 +1264,7 @@ def test_a_manifest_key_given_twice_is_refused(tmp_path):
 def test_a_manifest_yaml_error_quotes_no_line(tmp_path):
     """PyYAML's own message quotes the line it stopped at; the manifest's error used to carry
     it, now only its line and column."""
-    from paretocal.batch import read_manifest
+    from paretocal.apps.batch import read_manifest
 
     path = tmp_path / "m.yaml"
     path.write_text("- {id: a, source: [" + "secret" * 100 + "\n")
@@ -1284,7 +1284,7 @@ def test_yaml_merge_keys_may_be_overridden():
 def test_devices_and_fifos_are_named_and_never_opened(capfd, tmp_path, rig, raw_frames):
     """A mask that is /dev/zero was said to be "not found"; a FIFO given as an input must not
     be opened (reading it waits for a writer)."""
-    from paretocal import batch
+    from paretocal.apps import batch
 
     _edit_calib(rig, lambda c: c["camera"].update(mask="/dev/zero"))
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST,

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from paretocal import Settings
-from paretocal.batch import Entry, entry_fingerprint, is_done, read_manifest, run_batch
+from paretocal.apps.batch import Entry, entry_fingerprint, is_done, read_manifest, run_batch
 from paretocal.cli import main
 from paretocal.errors import InputError
 from paretocal.geometry import correction_matrix

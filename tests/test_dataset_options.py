@@ -87,7 +87,7 @@ def test_calibrate_run_records_what_it_used_and_resumes_with_it(folder, tmp_path
 
 def test_batch(folder, tmp_path):
     pytest.importorskip("distributed")
-    from paretocal.batch import Entry, entry_fingerprint, entry_settings, run_batch
+    from paretocal.apps.batch import Entry, entry_fingerprint, entry_settings, run_batch
 
     manifest = tmp_path / "m.yaml"
     manifest.write_text(yaml.safe_dump({"entries": [{"id": "e", "source": str(folder)}]}))
@@ -126,7 +126,7 @@ def test_command_line(folder, tmp_path, capfd):
 
 def test_command_line_batch_passes_a_config_files_init_error(folder, tmp_path, capfd,
                                                                monkeypatch):
-    import paretocal.batch
+    import paretocal.apps.batch
 
     seen = []
 
@@ -134,7 +134,7 @@ def test_command_line_batch_passes_a_config_files_init_error(folder, tmp_path, c
         seen.append(dataset_options)
         return {"entries": 0, "ok": 0, "failed": 0, "skipped": 0, "entries_per_minute": None}
 
-    monkeypatch.setattr(paretocal.batch, "run_batch", fake)
+    monkeypatch.setattr(paretocal.apps.batch, "run_batch", fake)
     manifest = tmp_path / "m.yaml"
     manifest.write_text(yaml.safe_dump({"entries": [{"id": "e", "source": str(folder)}]}))
     config = tmp_path / "c.yaml"

@@ -19,7 +19,7 @@ RANKS = {
     "inputs": 8, "stage": 8, "verdict": 8, "result": 8, "wide": 8,
     "pipeline": 9, "check": 9, "depth": 9, "extract": 9,
     "report": 10,
-    "study": 11, "batch": 11, "rundir": 11, "rig": 11,
+    "apps": 11, "rundir": 11,
     "cli": 12, "__init__": 12,
     "__main__": 13,
 }

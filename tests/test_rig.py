@@ -183,7 +183,7 @@ def test_lidar_steps_for_another_camera(tmp_path):
 def test_two_camera_run(tmp_path, capsys):
     """Both cameras' run folders and rig.json; the implied pair is the one the two results
     give; started at calib.yaml's extrinsics, the initial pair is the reference pair."""
-    from paretocal.rig import RIG_JSON, calibrate_rig
+    from paretocal.apps.rig import RIG_JSON, calibrate_rig
     from paretocal.rundir import run_arguments
 
     rig = make_rig(tmp_path)
@@ -285,7 +285,7 @@ def test_joint_run_from_the_command_line(tmp_path, capsys):
     """``--joint``: one run folder OUT/joint over both cameras' frames, the second camera seen
     through its mount (calib.yaml's camera-to-camera pose); rig.json holds every camera's
     extrinsic, which keeps that pose; the run records the cameras for a resume."""
-    from paretocal.rig import RIG_JSON
+    from paretocal.apps.rig import RIG_JSON
     from paretocal.rundir import run_arguments
 
     rig = make_rig(tmp_path)

@@ -134,7 +134,7 @@ def test_resume_and_publish_check_the_outputs_list_too(capfd, tmp_path, raw_fram
 
 
 def test_a_batch_entry_with_a_tampered_folder_fails_and_touches_nothing(tmp_path, raw_date):
-    from paretocal.batch import Entry, run_entry
+    from paretocal.apps.batch import Entry, run_entry
 
     out = tmp_path / "batch"
     run = out / "runs" / "a"
@@ -150,7 +150,7 @@ def test_a_batch_entry_with_a_tampered_folder_fails_and_touches_nothing(tmp_path
 
 
 def test_a_batch_entry_whose_folder_is_a_link_fails_and_touches_nothing(tmp_path, raw_date):
-    from paretocal.batch import Entry, run_entry
+    from paretocal.apps.batch import Entry, run_entry
 
     victim = tmp_path / "mine"
     victim.mkdir()
@@ -365,12 +365,12 @@ def test_what_marks_a_run_folder(tmp_path):
 def test_rig_runs_into_their_own_folder_and_refuse_others(capfd, tmp_path, monkeypatch):
     """A rig's run folder (rig.json, a run folder per camera) is rerun into; a folder of other
     files, as the rig's or as a camera's, is refused."""
-    import paretocal.rig
+    import paretocal.apps.rig
     from .test_rig import make_rig
 
     rig = make_rig(tmp_path)
     calls = []
-    monkeypatch.setattr(paretocal.rig, "calibrate_rig",
+    monkeypatch.setattr(paretocal.apps.rig, "calibrate_rig",
                         lambda *a, **k: calls.append(a) or {"pairs": []})
     out = tmp_path / "out"
     for name in ("front", "left"):

@@ -12,11 +12,11 @@ import pytest
 
 from paretocal.cli import main
 from paretocal.decide import chord_distance, knee_region
-from paretocal.study import StudyPlan, run_study
-from paretocal.study.epsilon import epsilon_constraint, front_f1_at
-from paretocal.study.innovization import correlations, findings, trends
-from paretocal.study.robustness import summarise_sweep
-from paretocal.study.single import single_objective
+from paretocal.apps.study import StudyPlan, run_study
+from paretocal.apps.study.epsilon import epsilon_constraint, front_f1_at
+from paretocal.apps.study.innovization import correlations, findings, trends
+from paretocal.apps.study.robustness import summarise_sweep
+from paretocal.apps.study.single import single_objective
 
 TARGET = np.array([0.1, -0.2, 0.05, 1.5, -2.0, 0.5])
 XL = np.array([-1.5, -1.5, -1.5, -25, -25, -25, 10])

@@ -32,7 +32,8 @@ _LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "con
          "load_frames": "io", "read_extrinsic": "io", "read_init": "io", "write_extrinsic": "io",
          "write_run": "report.results", "CalibrationResult": "pipeline",
          "calibrate": "pipeline", "calibrate_run": "rundir", "resume_run": "rundir",
-         "StudyPlan": "study", "run_study": "study"}
+         "StudyPlan": "apps.study", "run_study": "apps.study",
+         "run_batch": "apps.batch", "calibrate_rig": "apps.rig"}
 
 
 def __getattr__(name: str):
@@ -59,6 +60,6 @@ def __dir__():
 
 
 __all__ = ["CalibrationResult", "ParetocalError", "Settings", "StudyPlan", "__version__",
-           "calibrate", "calibrate_run", "check_extrinsic", "depth_map", "extract_bag",
-           "load_frames", "load_settings", "read_extrinsic", "read_init", "resume_run",
-           "run_study", "write_depth", "write_extrinsic", "write_run"]
+           "calibrate", "calibrate_rig", "calibrate_run", "check_extrinsic", "depth_map",
+           "extract_bag", "load_frames", "load_settings", "read_extrinsic", "read_init", "resume_run",
+           "run_batch", "run_study", "write_depth", "write_extrinsic", "write_run"]

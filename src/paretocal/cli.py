@@ -321,13 +321,13 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
                    strict: bool, force: bool, joint: bool = False) -> None:
     """``calibrate`` on a rig folder: every camera (or ``--camera NAME``) into ``out/NAME/``
     and ``out/rig.json``, or with ``joint`` all cameras at once into ``out/joint/``
-    (:mod:`paretocal.rig`)."""
+    (:mod:`paretocal.apps.rig`)."""
     import dataclasses
 
     from .errors import Interrupted
     from .io import rig_cameras
     from .io.atomic import check_output_dir, check_own_folder
-    from .rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
+    from .apps.rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
 
     cams = rig_cameras(source)
     names = [n for n, _ in cams]
@@ -397,7 +397,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                 recorded = run_arguments(out)
                 result = resume_run(out, checkpoint_every, progress=progress)
                 if recorded["joint"]:
-                    from .rig import write_joint_summary
+                    from .apps.rig import write_joint_summary
 
                     write_joint_summary(result, out, recorded["joint"], recorded["source"])
             else:
@@ -622,7 +622,7 @@ def study(
 
     from .config import load_settings
     from .io import load_frames
-    from .study import STUDY_MARKS, StudyPlan, run_study
+    from .apps.study import STUDY_MARKS, StudyPlan, run_study
 
     from .io.atomic import check_output_dir, check_own_folder
 
@@ -801,7 +801,7 @@ def batch(
     when interrupted (Ctrl-C or SIGTERM), after writing the summary of what is done: rerun the
     same command to continue.
     """
-    from .batch import BATCH_MARKS, BatchInterrupted, run_batch
+    from .apps.batch import BATCH_MARKS, BatchInterrupted, run_batch
     from .config import load_settings, states_init_error
 
     from .io.atomic import check_output_dir, check_own_folder

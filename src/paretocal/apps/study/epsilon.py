@@ -15,8 +15,8 @@ from pymoo.algorithms.soo.nonconvex.ga import GA
 from pymoo.core.problem import Problem
 from pymoo.optimize import minimize as pymoo_minimize
 
-from ..search.polish import newton_polish
-from ..search.problem import RoundN, SamplingWithInit
+from ...search.polish import newton_polish
+from ...search.problem import RoundN, SamplingWithInit
 
 
 class EpsilonProblem(Problem):

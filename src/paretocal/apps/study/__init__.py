@@ -1,4 +1,4 @@
-"""The paper's studies of a calibration front (see :mod:`paretocal.study.run`)."""
+"""The paper's studies of a calibration front (see :mod:`paretocal.apps.study.run`)."""
 
 from .run import STUDIES, STUDY_MARKS, StudyPlan, run_study
 

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from ..geometry import pose_error
+from ...geometry import pose_error
 
 
 def weight_sweep(frames, T_init: np.ndarray, settings, weights, seeds,
@@ -38,7 +38,7 @@ def weight_sweep(frames, T_init: np.ndarray, settings, weights, seeds,
         shape (6,)), ``T`` (4, 4), reference errors (``rotation_deg``, ``translation_cm``,
         per axis) when known, ``wall_s``.
     """
-    from ..pipeline import calibrate
+    from ...pipeline import calibrate
 
     runs = list(itertools.product(weights, seeds))
     rows = []

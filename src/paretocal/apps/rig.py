@@ -35,16 +35,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import project
-from .config import Settings, dataset_settings
-from .errors import Interrupted, ParetocalError, SettingsError
-from .geometry import correction_params, invert, pose_error
-from .inputs import joint_camera, rig_lidar_steps
-from .io import load_rig_frames, rig_cameras, write_extrinsic
-from .io.atomic import atomic_write_text
-from .quality import AXES
-from .result import CalibrationResult
-from .rundir import calibrate_run
+from ..camera import project
+from ..config import Settings, dataset_settings
+from ..errors import Interrupted, ParetocalError, SettingsError
+from ..geometry import correction_params, invert, pose_error
+from ..inputs import joint_camera, rig_lidar_steps
+from ..io import load_rig_frames, rig_cameras, write_extrinsic
+from ..io.atomic import atomic_write_text
+from ..quality import AXES
+from ..result import CalibrationResult
+from ..rundir import calibrate_run
 
 log = logging.getLogger(__name__)
 

@@ -34,9 +34,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
-from .io.atomic import atomic_path, atomic_write_text
-from .report.results import json_default
+from ..errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
+from ..io.atomic import atomic_path, atomic_write_text
+from ..report.results import json_default
 
 RECORD = "entry.json"
 #: Names a batch folder holds (runs/ from the first task on): the CLI refuses to write a batch
@@ -87,7 +87,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
     ``source``, a duplicate or unsafe id (it names a folder), an unknown field, or a field of
     the wrong type.
     """
-    from .io.paths import kind_of, not_found
+    from ..io.paths import kind_of, not_found
 
     path = Path(path)
     kind = kind_of(path)
@@ -102,7 +102,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
     else:
         import yaml
 
-        from .io.text import load_yaml, yaml_error
+        from ..io.text import load_yaml, yaml_error
 
         try:
             doc = load_yaml(text, path)      # refuses alias bombs and duplicate keys, naming it
@@ -151,7 +151,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
 def _manifest_text(path: Path) -> str:
     """The manifest's text; a binary file (a NUL byte, or not UTF-8) is refused up front,
     before a parser reports it as something else."""
-    from .io.text import MAX_TEXT_BYTES
+    from ..io.text import MAX_TEXT_BYTES
 
     try:
         size = path.stat().st_size
@@ -228,9 +228,9 @@ def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
     """What an entry's result depends on, hashed: its fields, the bytes of its initial
     extrinsic (so an edited ``init`` file counts too), the settings (``Settings.to_dict``) and
     whether it is checked and drawn. A record is done only for the same fingerprint."""
-    from .search.checkpoint import fingerprint
+    from ..search.checkpoint import fingerprint
 
-    from .io.text import MAX_TEXT_BYTES
+    from ..io.text import MAX_TEXT_BYTES
 
     init = None
     if entry.init:
@@ -251,8 +251,8 @@ def entry_settings(entry: Entry, settings, dataset_options: bool = True) -> dict
     (:func:`~paretocal.config.dataset_settings`), as ``paretocal calibrate`` on the source
     would. A calib.yaml that cannot be read adds nothing here: the entry fails on it when it
     runs, with the reader's message in its record."""
-    from .config import dataset_settings
-    from .io import source_options
+    from ..config import dataset_settings
+    from ..io import source_options
 
     try:
         options = source_options(entry.source) if dataset_options else {}
@@ -339,8 +339,8 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
         pairs logged while the entry ran).
     """
-    from .io.paths import not_plain, odd_kind
-    from .rundir import check_run_folder, locked
+    from ..io.paths import not_plain, odd_kind
+    from ..rundir import check_run_folder, locked
 
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
@@ -371,7 +371,7 @@ def _attempt(entry: Entry, settings: dict, run_dir: Path, check: bool, threads: 
              figures: bool, t0: float) -> dict:
     """The entry's record: calibrated, or failed with the reason."""
     try:
-        from .objective.kernel import set_threads
+        from ..objective.kernel import set_threads
 
         set_threads(threads)
         record = _calibrate_entry(entry, settings, run_dir, check, figures)
@@ -387,12 +387,12 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
                      figures: bool) -> dict:
     import dataclasses
 
-    from .check import check_extrinsic
-    from .config import settings_from_mapping
-    from .geometry import pose_error
-    from .io import load_frames, read_init
-    from .pipeline import calibrate
-    from .rundir import publish_run, run_record
+    from ..check import check_extrinsic
+    from ..config import settings_from_mapping
+    from ..geometry import pose_error
+    from ..io import load_frames, read_init
+    from ..pipeline import calibrate
+    from ..rundir import publish_run, run_record
 
     settings = dataclasses.replace(settings_from_mapping(settings_dict, "batch settings"),
                                    camera=entry.camera, frames=entry.frames)
@@ -478,7 +478,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     An entry is skipped when its ``entry.json`` says ``ok`` with the fingerprint
     (:func:`entry_fingerprint`) of the same entry fields and settings; an edited entry, an
     edited ``init`` file or other settings calibrate it again. What the entries' tasks log
-    is logged here (logger ``paretocal.batch``) as ``[<id>] message`` when each finishes,
+    is logged here (logger ``paretocal.apps.batch``) as ``[<id>] message`` when each finishes,
     and so is each failure.
 
     Parameters
@@ -517,7 +517,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
         On KeyboardInterrupt (SIGINT, or SIGTERM turned into one by the caller), after the
         tasks and the cluster are stopped and the summary of the entries finished is written.
     """
-    from .config import Settings
+    from ..config import Settings
 
     require_fleet()
     t0 = time.perf_counter()
@@ -547,7 +547,7 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     ordered = [records[e.id] for e in entries]
     rows = summary_rows(ordered)
     files = write_summary(rows, out)
-    from .report.fleet import fleet_figure
+    from ..report.fleet import fleet_figure
 
     fleet_figure(rows, out / "fleet.png")
     files.append(out / "fleet.png")

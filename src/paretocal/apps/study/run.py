@@ -28,14 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
-from ..config import Settings
-from ..errors import InputError
-from ..geometry import pose_error
-from ..io.atomic import atomic_write_text
-from ..io.layouts import load_frames
-from ..report.results import json_default, write_run
-from ..search.problem import VARIABLES, bounds
+from ... import __version__
+from ...config import Settings
+from ...errors import InputError
+from ...geometry import pose_error
+from ...io.atomic import atomic_write_text
+from ...io.layouts import load_frames
+from ...report.results import json_default, write_run
+from ...search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends
 from .robustness import summarise_sweep, weight_sweep
@@ -118,9 +118,9 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     dict
         The ``study.json`` document.
     """
-    from ..pipeline import calibrate, resolve_init
-    from ..report import study_figures as figs
-    from ..report.html import study_report
+    from ...pipeline import calibrate, resolve_init
+    from ...report import study_figures as figs
+    from ...report.html import study_report
 
     plan = plan or StudyPlan()
     settings = (settings or Settings()).replace(search={"pop": plan.pop, "gens": plan.gens})

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from ..search.problem import UNITS, VARIABLES
+from ...search.problem import UNITS, VARIABLES
 
 OBJECTIVES = ("f1", "f2")
 STRONG = 0.7       # |rank correlation| called strong
