@@ -44,7 +44,7 @@ from .config import Settings
 from .egomotion import camera_odometry, image_features, lidar_odometry, rotation_from_motion
 from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
-from .objective.photo import build_photo_scene, photo_cost
+from .objective.photo import UNSEEN_COST, PhotoScene, build_photo_scene, photo_cost
 from .quality import local_optimum
 from .search.basin import AMBIGUOUS_P, CLEAR_P, USABLE_DEG, USABLE_M, paired_preference
 from .stage import Stage
@@ -159,7 +159,7 @@ class WideStart:
     rounds: list = field(default_factory=list)
     images: list | None = field(default=None, repr=False)
     photo: dict | None = None
-    scene: object = field(default=None, repr=False)
+    scene: PhotoScene | None = field(default=None, repr=False)
     seed: int = 0
     tried: list = field(default_factory=list, repr=False)
 
@@ -546,8 +546,6 @@ def _photo_p(xyz: np.ndarray, wt: np.ndarray, var: np.ndarray, prior: float,
     """The share of a paired Poisson bootstrap over the map's blocks in which the second pose
     is not more photo-consistent than the first (``wt``, ``var``: (2, N) per-point weights and
     variances, :func:`~paretocal.objective.photo.photo_cost`)."""
-    from .objective.photo import UNSEEN_COST
-
     _, block = np.unique(np.floor(xyz / PHOTO_BLOCK_M).astype(np.int64), axis=0,
                          return_inverse=True)
     block = block.ravel()
