@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import correction_matrix
+from .objective.objective import AlignmentObjective
 from .search.polish import DEFAULT_FD_STEP, fd_stencil, newton_step, stencil_derivatives
 
 #: The Newton steps' floor on the Hessian's eigenvalues, relative to the largest
@@ -90,7 +91,7 @@ def _jackknife_se(per_frame: np.ndarray, H: np.ndarray, h: np.ndarray) -> np.nda
     return np.sqrt(np.maximum(np.diag(Hi @ B @ Hi), 0.0))
 
 
-def at_every_point(objective, x: np.ndarray) -> np.ndarray:
+def at_every_point(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """A copy of the solution ``x`` (7,) (or solutions (k, 7)) with ``n`` set to every feature
     point of the frames."""
     x = np.array(x, dtype=np.float64, copy=True)
@@ -185,7 +186,7 @@ class Quality:
                                     for a in AXES]))
 
 
-def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> Quality:
+def quality_report(objective: AlignmentObjective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) -> Quality:
     """Curvature, identifiability and frame agreement of the extrinsic ``x``.
 
     Parameters
@@ -224,7 +225,7 @@ def quality_report(objective, x: np.ndarray, h: np.ndarray = DEFAULT_FD_STEP) ->
                    frame_steps=steps.reshape(-1, 6), well_observed=well)
 
 
-def axis_resolution(objective, x: np.ndarray) -> np.ndarray:
+def axis_resolution(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
     pixel on average at ``x`` (7,), the other axes held; inf for an axis that does not move
     them."""
@@ -238,14 +239,15 @@ def axis_resolution(objective, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def pixel_fd_step(objective, x: np.ndarray) -> np.ndarray:
+def pixel_fd_step(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """Finite-difference steps (6,) in m and deg for the quality report at ``x`` (7,): the
     change of each axis that moves the points by :data:`FD_STEP_PX` pixels, at most
     :data:`MAX_FD_STEP`."""
     return np.minimum(FD_STEP_PX * axis_resolution(objective, x), MAX_FD_STEP)
 
 
-def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[float, float]:
+def neighbour_fraction(objective: AlignmentObjective, x: np.ndarray,
+                       delta: np.ndarray) -> tuple[float, float]:
     """Levinson & Thrun's test: the share of the 3^6 - 1 grid neighbours of ``x`` (steps
     ``delta``, m and deg) that score lower than ``x`` itself, and the best improvement (px)."""
     grid = np.stack(np.meshgrid(*[[-1.0, 0.0, 1.0]] * 6, indexing="ij"), -1).reshape(-1, 6)
@@ -257,7 +259,7 @@ def neighbour_fraction(objective, x: np.ndarray, delta: np.ndarray) -> tuple[flo
     return float(better.mean()), float(max(0.0, f[0] - f[1:].min()))
 
 
-def local_optimum(objective, x: np.ndarray, iters: int = 15):
+def local_optimum(objective: AlignmentObjective, x: np.ndarray, iters: int = 15):
     """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,).
 
     ``x`` (k, 7): the k solutions are polished together (one objective call per step for all:
@@ -271,7 +273,7 @@ def local_optimum(objective, x: np.ndarray, iters: int = 15):
     return Z[0] if x.ndim == 1 else Z
 
 
-def displacement_px(objective, x: np.ndarray, y: np.ndarray, frames=None):
+def displacement_px(objective: AlignmentObjective, x: np.ndarray, y: np.ndarray, frames=None):
     """Mean pixel distance between the feature points' projections under pose x (7,) and
     pose y (7,) (a float), or each of poses y (k, 7) (an array (k,)), over every frame or
     the frames of index ``frames``."""

@@ -3,10 +3,11 @@
 from .chamfer import combine, group_weights
 from .cost import CostModel, measure_cost_model
 from .kernel import get_evaluator, sums_kdtree, sums_numba, sums_numpy
-from .objective import CalibrationObjective, FrameSubset
+from .objective import AlignmentObjective, CalibrationObjective, FrameSubset, PopulationObjective
 from .paper import paper_chamfer
 from .scene import Scene, build_scene
 
-__all__ = ["CalibrationObjective", "CostModel", "FrameSubset", "Scene", "build_scene", "combine",
-           "get_evaluator", "group_weights", "measure_cost_model", "paper_chamfer",
-           "sums_kdtree", "sums_numba", "sums_numpy"]
+__all__ = ["AlignmentObjective", "CalibrationObjective", "CostModel", "FrameSubset",
+           "PopulationObjective", "Scene", "build_scene", "combine", "get_evaluator",
+           "group_weights", "measure_cost_model", "paper_chamfer", "sums_kdtree", "sums_numba",
+           "sums_numpy"]

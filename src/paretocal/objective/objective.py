@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
 from ..config import ObjectiveSettings
@@ -11,6 +13,36 @@ from .cost import CostModel, measure_per_candidate
 from .kernel import get_evaluator
 from .paper import paper_chamfer
 from .scene import Scene
+
+
+class AlignmentObjective(Protocol):
+    """What the polish, the quality report and the verdict call: the alignment objective of a
+    whole population of candidates ``X`` (C, 7), ``[x, y, z, yaw, pitch, roll, n]`` (m, deg,
+    points per frame), in one call. :class:`CalibrationObjective` and :class:`FrameSubset`
+    are two."""
+
+    scene: Scene
+
+    def transforms(self, X: np.ndarray) -> np.ndarray:
+        """Candidate extrinsics ``T_cam_lidar``, shape (C, 4, 4)."""
+        ...
+
+    def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
+        """At least ``f1`` (C,) (px) and ``per_frame`` (C, F), the per-frame terms."""
+        ...
+
+
+class PopulationObjective(AlignmentObjective, Protocol):
+    """What the search calls besides: both objectives, ``F`` (C, 2) ``[f1, f2]``, and the
+    cost alone."""
+
+    def evaluate(self, X: np.ndarray) -> np.ndarray:
+        """``F`` of shape (C, 2) for candidates ``X`` (C, 7)."""
+        ...
+
+    def cost(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """At least ``f2`` (C,), the modelled cost of evaluating each candidate."""
+        ...
 
 
 class CalibrationObjective:

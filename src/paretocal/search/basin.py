@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SearchSettings
+from ..objective.objective import AlignmentObjective, PopulationObjective
 from ..quality import displacement_px, local_optimum
 from .front_polish import polish_front
 
@@ -42,7 +43,7 @@ MIN_FRAMES = 2
 SAME_BASIN_SHARE = 0.25
 
 
-def paired_preference(objective, near: np.ndarray, far: np.ndarray) -> dict:
+def paired_preference(objective: AlignmentObjective, near: np.ndarray, far: np.ndarray) -> dict:
     """Per-frame comparison of two poses (7,) at every point, without the sampling charge.
 
     Returns ``mean_px`` (mean advantage of ``far``, positive when it scores lower), ``se_px``,
@@ -71,8 +72,9 @@ def departure(x: np.ndarray, init_error_deg: float, init_error_m: float) -> floa
     return float(max(np.abs(x[:3]).max() / init_error_m, np.abs(x[3:6]).max() / init_error_deg))
 
 
-def prefer_near(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
-                n_max: int, polish_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
+def prefer_near(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
+                search: SearchSettings, n_min: int, n_max: int,
+                polish_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
     """Keep the start's basin unless the data support the front's best pose (module docstring).
 
     Parameters

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SearchSettings
+from ..objective.objective import PopulationObjective
 from .nsga import front_of
 from .polish import DEFAULT_FD_STEP, fd_gradient_hessian, newton_polish, polish
 from .problem import bounds
@@ -12,9 +13,9 @@ from .problem import bounds
 FINISH_STEP = np.array([0.005, 0.005, 0.005, 0.05, 0.05, 0.05])  # compass steps after Newton
 
 
-def polish_front(objective, X: np.ndarray, F: np.ndarray, search: SearchSettings, n_min: int,
-                 n_max: int, iters: int, grid: int = 12, max_front: int = 32,
-                 explore: bool = True):
+def polish_front(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
+                 search: SearchSettings, n_min: int, n_max: int, iters: int, grid: int = 12,
+                 max_front: int = 32, explore: bool = True):
     """Polish every front solution at its own n, plus the best pose at a grid of n values.
 
     Damped Newton steps with finite-difference derivatives (batched over all solutions) follow

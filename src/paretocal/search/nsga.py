@@ -16,6 +16,7 @@ import numpy as np
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
 from ..config import SearchSettings
+from ..objective.objective import PopulationObjective
 from ..errors import STOP
 from .checkpoint import Checkpoint, SearchInterrupted
 from .engine import ArrayNSGA2
@@ -87,7 +88,7 @@ def front_of(X: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Xf[order], Ff[order]
 
 
-def run_nsga2(objective, settings: SearchSettings, n_min: int, n_max: int,
+def run_nsga2(objective: PopulationObjective, settings: SearchSettings, n_min: int, n_max: int,
               progress=None, seeds: np.ndarray | None = None,
               checkpoint: Checkpoint | None = None) -> SearchResult:
     """Run NSGA-II for ``settings.gens`` generations.
