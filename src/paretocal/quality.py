@@ -46,7 +46,7 @@ FD_STEP_PX = 2.0
 MAX_FD_STEP = 10.0 * DEFAULT_FD_STEP
 
 
-def _derivatives(values: np.ndarray, h: np.ndarray):
+def _derivatives(values: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradient (6,) and Hessian (6, 6) from the 28 stencil values of one candidate."""
     _, g, H = stencil_derivatives(values[None], h)
     return g[0], H[0]

@@ -341,7 +341,7 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     if perm is not None:
         R, n = R[perm], n[perm]
     # Per-thread scratch for a block's footprints (indexed by numba's thread id).
-    T_ = numba.config.NUMBA_NUM_THREADS
+    T_ = max_threads()
     try:
         _sums_numba(R, scene.cam_params, n, scene.gx, scene.gy, scene.gz, scene.gweight,
                     scene.group_start, scene.group_count, scene.point_start, scene.dtq,
@@ -358,7 +358,13 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     return S1, S2, NIN
 
 
-def block_scratch(threads: int):
+def max_threads() -> int:
+    """Numba's thread pool size: every thread id a parallel loop can run on is below it, so
+    per-thread scratch has this many rows (the threads in use may be fewer)."""
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import
+
+
+def block_scratch(threads: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-thread scratch of the fused kernel: footprints (threads, BLOCK + 8) int64, fractions
     (threads, 2, BLOCK + 8) float64, flags (threads, BLOCK + 64) bool, of which a block uses
     the first BLOCK. The unused tail of each row (64 bytes) keeps two threads' data out of
@@ -514,4 +520,4 @@ def one_thread():
 def set_threads(k: int | None) -> None:
     """Limit the numba thread count (None leaves it at numba's default)."""
     if HAVE_NUMBA and k is not None:
-        numba.set_num_threads(max(1, min(int(k), numba.config.NUMBA_NUM_THREADS)))
+        numba.set_num_threads(max(1, min(int(k), max_threads())))

@@ -97,6 +97,8 @@ class CalibrationObjective:
         out = combine(S1, S2, W1, W2, self.scene.outside, self.weights, k)
         out["in_view"] = n_in.sum(axis=1) / np.maximum(self.scene.points_used(n), 1)
         if self.settings.chamfer == "paper":
+            if self.edge_uv is None:
+                raise ValueError("the paper's Chamfer needs the frames' edge pixels (edge_uv)")
             out["f1"] = paper_chamfer(self.scene, self.edge_uv, T, n)
         return out
 

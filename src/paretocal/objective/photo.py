@@ -43,7 +43,7 @@ try:
     import numba
     from numba import njit, prange
 
-    from .kernel import BLOCK, block_scratch, project_block
+    from .kernel import BLOCK, block_scratch, max_threads, project_block
 
     HAVE_NUMBA = True
 except Exception:  # pragma: no cover - exercised only where numba is broken
@@ -384,7 +384,7 @@ def photo_cost(scene: PhotoScene, T: np.ndarray) -> dict[str, np.ndarray]:
     S1, S2, W = np.zeros((C, m)), np.zeros((C, m)), np.zeros((C, m))
     N = np.zeros((C, m), np.int64)
     x, y, z = (np.ascontiguousarray(scene.xyz[:, i]) for i in range(3))
-    threads = numba.config.NUMBA_NUM_THREADS
+    threads = max_threads()
     cell = np.array([occlusion_cell_px(m, w, h) for w, h in zip(scene.width, scene.height)],
                     np.int64)
     cells = int(max(((h - 1) // c + 1) * ((w - 1) // c + 1)
