@@ -19,6 +19,8 @@ reported as ambiguous when the data lean towards it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..config import SearchSettings
@@ -115,12 +117,13 @@ def prefer_near(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
     T = objective.transforms(np.vstack([near, far]))
     e = pose_error(T[1], T[0])
     s = search
-    info = {"separation_px": round(float(sep_px), 3),
-            "separation_deg": round(float(e["rotation_deg"]), 4),
-            "separation_cm": round(float(e["translation_cm"]), 3),
-            "departure_near": round(departure(near, s.init_error_deg, s.init_error_m), 3),
-            "departure_far": round(departure(far, s.init_error_deg, s.init_error_m), 3),
-            "ambiguous": False}
+    info: dict[str, Any] = {
+        "separation_px": round(float(sep_px), 3),
+        "separation_deg": round(float(e["rotation_deg"]), 4),
+        "separation_cm": round(float(e["translation_cm"]), 3),
+        "departure_near": round(departure(near, s.init_error_deg, s.init_error_m), 3),
+        "departure_far": round(departure(far, s.init_error_deg, s.init_error_m), 3),
+        "ambiguous": False}
     limit = SAME_BASIN_SHARE * objective.scene.truncation_px
     if sep_px <= limit:
         info.update(same_basin=True, kept="far")

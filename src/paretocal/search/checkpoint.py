@@ -25,6 +25,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from typing import TypeGuard
+
 import numpy as np
 
 from ..errors import InputError, Interrupted
@@ -105,7 +107,8 @@ class Checkpoint:
         arrays = {k: np.asarray(getattr(state, k)) for k in ARRAYS}
         with atomic_path(Path(self.path)) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
+                # (numpy's stub reads **arrays as possibly naming allow_pickle: they never do)
+                np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)  # type: ignore[arg-type]
                 fh.flush()
                 os.fsync(fh.fileno())
 
@@ -226,5 +229,5 @@ def _check_cost_model(path: Path, model) -> None:
                          "checkpoint is damaged (remove it to start the search over)")
 
 
-def _is_int(v) -> bool:
+def _is_int(v) -> TypeGuard[int]:
     return isinstance(v, int) and not isinstance(v, bool)

@@ -115,6 +115,8 @@ def coarse_seeds(feats, T_init: np.ndarray, search: SearchSettings, objective: O
     from ..objective import CalibrationObjective, build_scene
 
     s = search
+    if not s.seed_grid_deg:
+        return np.empty((0, 6))                       # no grid, no seeds (search.seed_grid_deg)
     tau = s.seed_truncation_px
     coarse = []
     for f in feats:
