@@ -219,22 +219,23 @@ def lidar_features(  # noqa: PLR0913 - keyword-only options, each documented
     rng_all = np.linalg.norm(xyz_all, axis=1)
     if ring is None:
         ring = recover_rings(pts, ring_method, rng=rng)
+    labels: np.ndarray
     if isinstance(ring, Rings):
         if ring_spacing_deg is None and ring.n_rings > 1:
             ring_spacing_deg = float(np.nanmedian(ring.spacing_deg()))
         if ring_elevation_deg is None and ring.n_rings > 1:
             ring_elevation_deg = ring.elevation_deg
-        n_rings, ring = ring.n_rings, ring.ring
+        n_rings, labels = ring.n_rings, ring.ring
     else:
-        ring = np.asarray(ring)
-        n_rings = int(ring.max()) + 1 if len(ring) else 0
-    keep = (rng_all > min_range_m) & (rng_all < max_range_m) & (ring >= 0)
+        labels = np.asarray(ring)
+        n_rings = int(labels.max()) + 1 if len(labels) else 0
+    keep = (rng_all > min_range_m) & (rng_all < max_range_m) & (labels >= 0)
     src = np.flatnonzero(keep)
-    xyz, refl, r, ring = xyz_all[keep], pts[keep, 3], rng_all[keep], ring[keep]
+    xyz, refl, r, labels = xyz_all[keep], pts[keep, 3], rng_all[keep], labels[keep]
     psi = azimuth(xyz)
-    order = np.lexsort((psi, ring))
-    xyz, refl, r, ring, psi, src = (xyz[order], refl[order], r[order], ring[order], psi[order],
-                                    src[order])
+    order = np.lexsort((psi, labels))
+    ring = np.asarray(labels[order])                 # from here on: ring labels, sorted
+    xyz, refl, r, psi, src = xyz[order], refl[order], r[order], psi[order], src[order]
     t = None
     if time is not None and len(time) == len(pts) and len(src):
         t = np.asarray(time, dtype=np.float64)[src]
@@ -310,7 +311,7 @@ def lidar_features(  # noqa: PLR0913 - keyword-only options, each documented
         nb = {step: across(step) for step in ((-2, -1, 1, 2) if edge_support else (-1, 1))}
         for step in (-1, 1):                           # the ring above, then the ring below
             cand, ok = nb[step]
-            if cross_jump_rel is None:
+            if el is not None and cross_jump_rel is None:
                 # The elevation gap of this pair of lasers (see GRAZING_MIN_DEG).
                 gap_pair = np.radians(np.abs(el[ring[cand]] - el[ring]))
                 rel = gap_pair / np.tan(np.radians(GRAZING_MIN_DEG))

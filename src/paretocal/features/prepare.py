@@ -248,7 +248,7 @@ def sampling_px(points: np.ndarray, ring: np.ndarray, camera: Camera, T: np.ndar
     rg, psi, uv, vis = rg[order], psi[order], uv[order], vis[order]
     same = (rg[1:] == rg[:-1]) & vis[1:] & vis[:-1]
     along = np.linalg.norm(uv[1:] - uv[:-1], axis=1)[same]
-    across = []
+    pieces = []
     ids, start = np.unique(rg, return_index=True)
     end = np.r_[start[1:], len(rg)]
     for k in range(len(ids) - 1):
@@ -261,8 +261,8 @@ def sampling_px(points: np.ndarray, ring: np.ndarray, camera: Camera, T: np.ndar
         pa, pb = psi[b][j - 1], psi[b][j]
         j = np.where(np.abs(psi[a] - pa) < np.abs(pb - psi[a]), j - 1, j)
         m = vis[a] & vis[b][j]
-        across.append(np.linalg.norm(uv[a][m] - uv[b][j][m], axis=1))
-    across = np.concatenate(across) if across else np.empty(0)
+        pieces.append(np.linalg.norm(uv[a][m] - uv[b][j][m], axis=1))
+    across = np.concatenate(pieces) if pieces else np.empty(0)
     if len(along) < 3 or len(across) < 3:
         return None
     return np.array([np.median(along), np.median(across)])
@@ -300,6 +300,8 @@ def point_weights(strength: np.ndarray, group: np.ndarray, rule: str,
         d = group == DEPTH_EDGE
         w[d] = np.clip(np.sqrt(np.maximum(strength[d], 0.0)), 0.1, 3.0)
     elif rule == "depth_balanced":
+        if range_m is None:
+            raise ValueError("the depth_balanced weighting needs each point's range (range_m)")
         band = np.searchsorted(RANGE_BINS_M, range_m)
         for g in np.unique(group):
             sel = group == g
