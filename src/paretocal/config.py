@@ -460,21 +460,17 @@ def dataset_settings(settings: Settings | None, options: dict,
 def parse_init_error(text, where: str) -> tuple[float | None, float | None]:
     """The stated initial error ``"DEG,M"`` (or a two-item list) as (deg, m), both positive;
     (None, None) for None. ``where`` names the option or key in the error."""
-    import math
+    from .io.layouts import positive_pair
 
     if text is None:
         return None, None
     items = text if isinstance(text, (list, tuple)) else str(text).replace(" ", "").split(",")
-    try:
-        deg, m = (float(v) for v in items)
-        ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
+    pair = positive_pair(items)
+    if pair is None:
         raise SettingsError(f"{where} {text!r}: expected DEG,M, two positive numbers (the "
                             "rotation in degrees and the translation in metres per axis, "
                             "e.g. 5,0.2)")
-    return deg, m
+    return pair
 
 
 def states_init_error(path: str | Path | None) -> bool:

@@ -683,19 +683,26 @@ def source_options(source: str | Path | Source) -> dict:
     return _options(cpath, read_mapping(cpath))
 
 
+def positive_pair(items) -> tuple[float, float] | None:
+    """A stated initial error ``(deg, m)`` from two items that are finite positive numbers,
+    else None (the caller names the file or option)."""
+    try:
+        deg, m = (float(v) for v in items)
+    except (TypeError, ValueError):
+        return None
+    ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
+    return (deg, m) if ok else None
+
+
 def _init_error(cpath: Path, value) -> tuple[float, float]:
     """calib.yaml ``init_error``: ``[deg, m]`` or ``{rotation_deg: .., translation_m: ..}``."""
     if isinstance(value, dict):
         value = [value.get("rotation_deg"), value.get("translation_m")]
-    try:
-        deg, m = (float(v) for v in value)
-        ok = math.isfinite(deg) and math.isfinite(m) and deg > 0 and m > 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
+    pair = positive_pair(value)
+    if pair is None:
         raise InputError(f"{cpath}: init_error must be [DEG, M] (or rotation_deg and "
                          f"translation_m), two positive numbers, got {quote(value)}")
-    return deg, m
+    return pair
 
 
 def detect_source(source: Path, camera_index: int = 2) -> Source:
