@@ -142,3 +142,29 @@ def test_command_line_batch_passes_a_config_files_init_error(folder, tmp_path, c
     assert run_cli(capfd, "batch", manifest, "--out", tmp_path / "o1")[0] == 0
     assert run_cli(capfd, "batch", manifest, "--out", tmp_path / "o2", "--config", config)[0] == 0
     assert seen == [True, False]
+
+
+@pytest.mark.parametrize("text, pair", [
+    ("5,0.2", (5.0, 0.2)), (" 20 , 1.5 ", (20.0, 1.5)), ([3, 0.1], (3.0, 0.1)),
+    ("5", None), ("5,0", None), ("-1,0.2", None), ("nan,0.2", None), ("a,b", None),
+    ("1,2,3", None),
+])
+def test_the_stated_error_is_read_alike_from_the_option_and_calib_yaml(tmp_path, text, pair):
+    """``--init-error`` and calib.yaml's ``init_error`` accept the same pairs (two finite
+    positive numbers) and refuse the same, each naming its own option or file."""
+    from paretocal.config import parse_init_error
+    from paretocal.errors import InputError, SettingsError
+
+    items = text if isinstance(text, list) else [v for v in text.split(",")]
+    root = tmp_path / "rig"
+    root.mkdir()
+    (root / "calib.yaml").write_text(yaml.safe_dump({"init_error": items}))
+    if pair is None:
+        with pytest.raises(SettingsError, match=r"--init-error .*expected DEG,M, two positive"):
+            parse_init_error(text, "--init-error")
+        with pytest.raises(InputError, match=r"calib.yaml: init_error must be \[DEG, M\]"):
+            source_options(root)
+    else:
+        assert parse_init_error(text, "--init-error") == pair
+        assert source_options(root)["init_error"] == pair
+    assert parse_init_error(None, "--init-error") == (None, None)
