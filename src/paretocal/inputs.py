@@ -63,15 +63,16 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     m = settings.motion
     if m.deskew == "off":
         return frames, {"compensated": False, "reason": "de-skewing is off (motion.deskew)"}
-    if any(f.time is None for f in frames):
+    times = [f.time for f in frames if f.time is not None]
+    if len(times) < len(frames):
         return frames, {"compensated": False,
                         "reason": "the clouds carry no per-point time: motion during a sweep "
                                   "is not compensated (a moving vehicle's clouds are skewed)"}
     if len(frames) < 2:
         return frames, {"compensated": False,
                         "reason": "one frame: ego-motion needs a sequence of sweeps"}
-    order = np.argsort([float(np.median(f.time)) for f in frames], kind="stable")
-    clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), frames[k].time)
+    order = np.argsort([float(np.median(t)) for t in times], kind="stable")
+    clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), times[k])
               for k in order]
     try:
         est = estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
@@ -85,7 +86,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
             "observable_xyz": [bool(v) for v in est.observable],
             "median_share_xyz": [round(float(v), 4) for v in np.median(est.share, axis=0)],
             "time_offset_s": m.time_offset_s}
-    sweep = max(float(np.ptp(f.time)) for f in frames)
+    sweep = max(float(np.ptp(t)) for t in times)
     info["skew_m"] = round(float(est.speed) * sweep, 3)
     if not est.compensable:
         axes = "".join(a for a, ok in zip("xyz", est.observable) if not ok)
@@ -97,8 +98,8 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     shift = 0.0
     for j, k in enumerate(order):
         f = frames[k]
-        t_ref = sweep_centre(f.time) + m.time_offset_s
-        xyz = deskew(f.points[:, :3], f.time, t_ref, est.frame_motion(j))
+        t_ref = sweep_centre(times[k]) + m.time_offset_s
+        xyz = deskew(f.points[:, :3], times[k], t_ref, est.frame_motion(j))
         shift = max(shift, float(np.max(np.linalg.norm(xyz - f.points[:, :3], axis=1))))
         pts = f.points.copy()
         pts[:, :3] = xyz

@@ -246,7 +246,7 @@ def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int
                     cost.probe["ms"], cost.probe["points"])
     elif path is not None:
         try:
-            folder.mkdir(parents=True, exist_ok=True)
+            path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(path, json.dumps(cost.to_dict()) + "\n")
         except OSError as exc:  # a read-only home: the run goes on with its measurement
             log.info("%s: cannot keep the cost model (%s)", path, exc)

@@ -560,10 +560,10 @@ def reliability(result: "CalibrationResult") -> dict:
     err = np.r_[[s.init_error_m] * 3, [s.init_error_deg] * 3]
     beyond = [a for a, v, e in zip(AXES, x, err) if abs(v) > e and a not in at_bound]
     if beyond:
-        units = ["cm" if a in ("x", "y", "z") else "deg" for a in beyond]
-        scale = [100.0 if u == "cm" else 1.0 for u in units]
+        beyond_units = ["cm" if a in ("x", "y", "z") else "deg" for a in beyond]
+        scale = [100.0 if u == "cm" else 1.0 for u in beyond_units]
         moved = ", ".join(f"{a} {abs(x[AXES.index(a)]) * k:.3g} {u}"
-                          for a, u, k in zip(beyond, units, scale))
+                          for a, u, k in zip(beyond, beyond_units, scale))
         reasons.append(f"the correction lies beyond the stated initial error ({moved}; "
                        f"--init-error {s.init_error_deg:g},{s.init_error_m:g}): either the "
                        "start was worse than stated (say so with --init-error) or the frames "

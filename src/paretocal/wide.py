@@ -453,8 +453,8 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     pick = min(far, key=lambda k: pc[k]) if far else 0
     disagree = bool(far and pc[pick] < pc[0])
     if disagree:
-        order = [pick] + [k for k in range(len(T)) if k != pick]
-        Z, f, T, pc = Z[order], f[order], T[order], pc[order]
+        reorder = np.array([pick] + [k for k in range(len(T)) if k != pick])
+        Z, f, T, pc = Z[reorder], f[reorder], T[reorder], pc[reorder]
     out.basins = []
     for Tk, fk, ck in zip(T, f, pc):
         e = pose_error(Tk, T[0])
