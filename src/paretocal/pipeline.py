@@ -110,7 +110,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                 "one camera with the wide initial error first, then the rig from its result")
         with _timed(timings, "wide", progress):
             wide = wide_start(frames, T_init, settings, rings)
-        if wide.applied:
+        if wide.T is not None:                    # applied
             # The usual calibration from the wide start, with the error it is good to.
             log.info("wide start: %.1f deg / %.0f cm from the start given",
                      *(float(pose_error(wide.T, T_init)[k])
@@ -123,11 +123,13 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         progress("features", 0, len(frames))
     with _timed(timings, "features"):
         # A resumed run decides with the cost model the interrupted run measured.
-        stored = checkpoint.stored_cost_model() if checkpoint is not None else None
-        stage = Stage(frames, T_init, T_init, settings, report("features"), rings,
-                      cost=CostModel(**dict(stored, probe=dict(
-                          stored["probe"], source=f"checkpoint {checkpoint.path}")))
-                      if stored else None,
+        cost = None
+        if checkpoint is not None:
+            stored = checkpoint.stored_cost_model()
+            if stored:
+                cost = CostModel(**dict(stored, probe=dict(
+                    stored["probe"], source=f"checkpoint {checkpoint.path}")))
+        stage = Stage(frames, T_init, T_init, settings, report("features"), rings, cost=cost,
                       images=None if wide is None else wide.images)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
