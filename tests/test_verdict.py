@@ -53,9 +53,7 @@ def test_no_restart_when_switched_off(stage):
     from paretocal.verdict import gather_evidence
 
     s = SETTINGS.replace(decision={"restarts": 0})
-    q = {"jackknife_se": dict.fromkeys(AXES, 0.1)}
-    ev = gather_evidence(stage.objective, s, stage.n_min, stage.n_max, _full(stage, np.zeros(6)),
-                         q)
+    ev = gather_evidence(stage.objective, s, stage.n_min, stage.n_max, _full(stage, np.zeros(6)))
     assert "restart" not in ev and set(ev) == {"contrast", "start", "intervals"}
 
 

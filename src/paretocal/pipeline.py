@@ -156,7 +156,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                                          stage.objective, X[i])))
         with _timed(timings, "verdict", progress):
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
-                                       X[i], quality, stage.sampling_px(),
+                                       X[i], stage.sampling_px(),
                                        cameras=stage.camera_groups())
             if wide is not None:
                 photo_check(wide, T[i])

@@ -39,7 +39,7 @@ from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
 from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import (AXES, TO_REPORT, UNITS, Quality, at_every_point, axis_resolution,
+from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution,
                       displacement_px, local_optimum, pixel_fd_step, quality_report)
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
@@ -476,12 +476,11 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                    quality: Quality, sampling: np.ndarray | None = None,
-                    cameras: dict | None = None) -> dict:
+                    sampling: np.ndarray | None = None, cameras: dict | None = None) -> dict:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring).
-    ``quality`` is the run's quality report at the result; the intervals use their own
-    jackknife, at the result's local optimum. ``sampling`` (2,): the LiDAR's sampling step
+    The intervals use their own jackknife, at the result's local optimum (not the run's
+    quality report at the result). ``sampling`` (2,): the LiDAR's sampling step
     in the image, px along u and v (:func:`~paretocal.features.prepare.sampling_px`, the
     median over the frames), which bounds how well any frame can place an edge. ``cameras``
     (a joint calibration of several cameras): as for :func:`camera_evidence`."""
