@@ -73,7 +73,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .camera import Camera
-from .lidar.registration import register_pair
+from .lidar.registration import prepare_cloud, register_pair, register_prepared
 
 log = logging.getLogger(__name__)
 
@@ -314,11 +314,16 @@ def lidar_odometry(clouds: Sequence[np.ndarray], *, method: str = "auto",  # noq
             if reg is not None:
                 cov[k] = reg.covariance
     else:
+        # Each sweep is the source of one pair and the target of the next: subsampled once.
+        rng = np.random.default_rng(seed)
+        target = prepare_cloud(clouds[0], points, rng)
         prev = None
         for k in range(K - 1):
             t0 = time.perf_counter()
-            reg = register_pair(clouds[k + 1], clouds[k], prev, points=points,
-                                max_translation=max_translation, block=block, seed=seed)
+            source = prepare_cloud(clouds[k + 1], points, rng, start=target.voxel)
+            reg = register_prepared(source, target, prev, max_translation=max_translation,
+                                    block=block)
+            target = source
             secs[k] = time.perf_counter() - t0
             if reg is None:
                 log.warning("LiDAR odometry: sweeps %d and %d did not register", k, k + 1)

@@ -32,9 +32,10 @@ from scipy.spatial import cKDTree
 from ..geometry import transform_points
 from .trajectory import cross_rows, se3_exp, se3_matrix
 
-__all__ = ["PairFit", "PairRegistration", "PlaneTarget", "coarse_translation", "conditioning",
-           "kd_tree", "neighbours", "plane_target", "prepare_levels", "register_levels",
-           "register_pair", "voxel_for_count", "voxel_pick"]
+__all__ = ["PairFit", "PairRegistration", "PlaneTarget", "PreparedCloud", "coarse_translation",
+           "conditioning", "kd_tree", "neighbours", "plane_target", "prepare_cloud",
+           "prepare_levels", "register_levels", "register_pair", "register_prepared",
+           "voxel_for_count", "voxel_pick"]
 
 
 # ----------------------------------------------------------------------------- registration
@@ -93,16 +94,21 @@ def _first_per_voxel(xyz: np.ndarray, size: float,
     return out[:m]
 
 
-def voxel_for_count(xyz: np.ndarray, target: int, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+def voxel_for_count(xyz: np.ndarray, target: int, rng: np.random.Generator,
+                    start: float | None = None) -> tuple[float, np.ndarray]:
     """The voxel edge (m) whose subsample holds about ``target`` points, and that subsample.
 
     Surfaces dominate a LiDAR sweep, so the count goes roughly as ``size^-2``; three secant
-    steps from a start at 1 % of the median range land within a few percent.
+    steps from a start at 1 % of the median range (or ``start``, m: a similar sweep's edge)
+    land within a few percent.
     """
     if len(xyz) <= target:
         return 0.0, np.arange(len(xyz))
-    r = np.linalg.norm(xyz, axis=1)
-    size = 0.01 * float(np.median(r[r > 0])) if (r > 0).any() else 1.0
+    if start is not None and start > 0:
+        size = float(start)
+    else:
+        r = np.linalg.norm(xyz, axis=1)
+        size = 0.01 * float(np.median(r[r > 0])) if (r > 0).any() else 1.0
     idx = voxel_pick(xyz, size, rng)
     for _ in range(3):
         ratio = len(idx) / target
@@ -406,13 +412,63 @@ def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None 
     for name, a in (("source", src), ("target", tgt)):
         if a.ndim != 2 or a.shape[1] != 3 or len(a) < 10:
             raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {a.shape}")
+    source_cloud = prepare_cloud(src, points, rng)
+    target_cloud = prepare_cloud(tgt, points, rng)
+    return register_prepared(source_cloud, target_cloud, T0, max_translation=max_translation,
+                             up=up, k_normal=k_normal, block=block, refine=refine)
+
+
+@dataclass
+class PreparedCloud:
+    """A cloud's subsamples for registration (:func:`prepare_cloud`), made once when the cloud
+    is registered twice (as the source of one pair and the target of the next).
+
+    Attributes
+    ----------
+    xyz : ndarray, shape (N, 3)
+        The cloud (m).
+    voxel : float
+        Voxel edge of the finest subsample (m).
+    levels : list of ndarray
+        Indices into ``xyz`` of the subsamples, coarse to fine.
+    targets : list of PlaneTarget or None
+        The levels with their normals, made on first use as a target.
+    """
+
+    xyz: np.ndarray
+    voxel: float
+    levels: list
+    targets: list | None = None
+
+    def plane_targets(self, k_normal: int) -> list:
+        if self.targets is None:
+            self.targets = [plane_target(self.xyz[i], neighbours(self.xyz[i], k_normal))
+                            for i in self.levels]
+        return self.targets
+
+
+def prepare_cloud(xyz: np.ndarray, points: int, rng: np.random.Generator,
+                  start: float | None = None) -> PreparedCloud:
+    """``xyz`` (N, 3) with its subsamples of about ``points`` points (:func:`prepare_levels`;
+    ``start``: a similar sweep's voxel edge, m, to begin the search for this one's)."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or len(xyz) < 10:
+        raise ValueError(f"a cloud must have shape (N, 3) with N >= 10, got {xyz.shape}")
+    size, levels = prepare_levels(xyz, points, rng, start)
+    return PreparedCloud(xyz, size, levels)
+
+
+def register_prepared(source: PreparedCloud, target: PreparedCloud,  # noqa: PLR0913
+                      T0: np.ndarray | None = None, *, max_translation: float = 5.0,
+                      up: Sequence[float] = (0.0, 0.0, 1.0), k_normal: int = 12,
+                      block: float = 4.0, refine: bool = True) -> PairRegistration | None:
+    """:func:`register_pair` on clouds prepared already (:func:`prepare_cloud`)."""
+    src, ls = source.xyz, source.levels
     up_axis = np.asarray(up, dtype=np.float64)
     up_axis = up_axis / np.linalg.norm(up_axis)
-    vs, ls = prepare_levels(src, points, rng)
-    vt, lt = prepare_levels(tgt, points, rng)
-    v = 0.5 * (vs + vt)
+    v = 0.5 * (source.voxel + target.voxel)
     gates = [12.0 * v, 6.0 * v, 3.0 * v]
-    targets = [plane_target(tgt[i], neighbours(tgt[i], k_normal)) for i in lt]
+    targets = target.plane_targets(k_normal)
     sources = [src[i] for i in ls]
     if T0 is None:
         if not refine:
@@ -442,9 +498,11 @@ def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None 
                             voxel=float(v))
 
 
-def prepare_levels(xyz: np.ndarray, points: int, rng: np.random.Generator):
-    """Indices of a fine subsample of about ``points`` points and two coarser ones (2x, 4x voxel)."""
-    size, fine = voxel_for_count(xyz, points, rng)
+def prepare_levels(xyz: np.ndarray, points: int, rng: np.random.Generator,
+                   start: float | None = None):
+    """Indices of a fine subsample of about ``points`` points and two coarser ones (2x, 4x voxel;
+    ``start``: :func:`voxel_for_count`'s)."""
+    size, fine = voxel_for_count(xyz, points, rng, start)
     if size == 0.0:
         r = np.linalg.norm(xyz, axis=1)
         # Fewer points than asked for: a nominal voxel from the mean spacing on the sweep's scale.
