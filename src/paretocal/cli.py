@@ -12,7 +12,7 @@ import logging
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Any, Optional, cast
 
 import click
 import typer
@@ -64,14 +64,25 @@ def _choices(section: str, name: str, cls: str) -> type[Enum]:
     """The command line's choices of a setting, from the one list in the configuration."""
     from .config import CHOICES
 
-    return Enum(cls, [(v.replace("-", "_"), v) for v in CHOICES[(section, name)]], type=str)
+    # Enum's functional API makes a class; mypy reads a call with a computed name as a member.
+    return cast(type[Enum],
+                Enum(cls, [(v.replace("-", "_"), v) for v in CHOICES[(section, name)]], type=str))
 
 
-Rule = _choices("decision", "rule", "Rule")
-Chamfer = _choices("objective", "chamfer", "Chamfer")
-Cost = _choices("objective", "cost", "Cost")
-Evaluator = _choices("objective", "evaluator", "Evaluator")
-Wide = _choices("search", "wide", "Wide")
+if TYPE_CHECKING:
+    # Classes made at run time from the configuration's lists, which the type checker cannot
+    # read: to it they are enums of strings like any other.
+    Rule = Enum
+    Chamfer = Enum
+    Cost = Enum
+    Evaluator = Enum
+    Wide = Enum
+else:
+    Rule = _choices("decision", "rule", "Rule")
+    Chamfer = _choices("objective", "chamfer", "Chamfer")
+    Cost = _choices("objective", "cost", "Cost")
+    Evaluator = _choices("objective", "evaluator", "Evaluator")
+    Wide = _choices("search", "wide", "Wide")
 
 
 def _setup_logging(verbose: bool, quiet: bool) -> None:
@@ -106,8 +117,8 @@ class _Progress:
         self.stream = stream if stream is not None else sys.stderr
         self.mode = None if quiet else "bars" if self.stream.isatty() else "lines"
         self.bar = None
-        self.tasks = {}
-        self.stage = None
+        self.tasks: dict[str, Any] = {}         # rich's task ids by stage
+        self.stage: str | None = None
 
     def __enter__(self):
         import time
@@ -252,7 +263,7 @@ def calibrate(
         raise SettingsError("--checkpoint-every must be 0 or more")
     settings = load_settings(config)
     if budget_ms is not None and rule is None:
-        rule = Rule.budget
+        rule = Rule("budget")
     from .config import parse_init_error
     err_deg, err_m = parse_init_error(init_error, "--init-error")
     settings = settings.replace(
@@ -277,10 +288,9 @@ def calibrate(
                               figures, quiet, checkpoint_every, strict, force, joint)
     if joint:
         raise SettingsError(f"--joint: {source} is not a rig folder (calib.yaml with cameras:)")
-    if camera is not None:
-        camera = _camera_index(camera)
-    if camera is not None or frames is not None:
-        settings = dataclasses.replace(settings, camera=camera if camera is not None
+    camera_index = _camera_index(camera) if camera is not None else None
+    if camera_index is not None or frames is not None:
+        settings = dataclasses.replace(settings, camera=camera_index if camera_index is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
     settings.validate()
@@ -349,7 +359,8 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         check_own_folder(out, (RIG_JSON, *names, JOINT_RUN), "rig run")
     for name in [JOINT_RUN] if joint else [camera] if camera is not None else names:
         _check_run_out(out / name, force)
-    first = names[0] if joint else camera
+    # --init names one camera: --camera NAME, or with --joint the first (refused above else).
+    first = names[0] if joint or camera is None else camera
     from .io import read_init
     T_inits = {first: read_init(init, source, None)} if init is not None else None
     unreliable = []
@@ -373,7 +384,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
                                     checkpoint_every, progress, on_camera=said,
                                     dataset_options=dataset_options, joint=joint)
     except Interrupted as exc:
-        _report(interrupted_line(exc, getattr(exc, "run_dir", out)))
+        _report(interrupted_line(exc, exc.run_dir if exc.run_dir is not None else out))
         raise typer.Exit(130) from None
     for pair in summary["pairs"]:
         typer.echo(f"paretocal: {pair_line(pair)}")
@@ -419,11 +430,14 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
 
     if ref is not None:
         typer.echo(f"paretocal: error vs reference per axis (LiDAR frame): {_fmt_axes(ref)}")
-    intervals = interval_text(result.reliability)         # only for a result judged ok
+    rel = result.reliability
+    if rel is None:                     # the pipeline judges every result it returns
+        raise ParetocalError(f"{out}: the run's result carries no verdict")
+    intervals = interval_text(rel)         # only for a result judged ok
     if intervals:
         typer.echo(f"paretocal: 95 % intervals per axis (LiDAR frame): {intervals}")
-    typer.echo(verdict_line(result.reliability))
-    if strict and result.reliability["verdict"] != "ok":
+    typer.echo(verdict_line(rel))
+    if strict and rel["verdict"] != "ok":
         raise typer.Exit(STRICT_EXIT)
 
 
@@ -631,8 +645,8 @@ def study(
     if not force:
         check_own_folder(out, STUDY_MARKS, "study")
     plan = StudyPlan.quick() if quick else StudyPlan()
-    plan = dataclasses.replace(plan, **{k: v for k, v in (("pop", pop), ("gens", gens))
-                                        if v is not None})
+    budgets: dict[str, Any] = {k: v for k, v in (("pop", pop), ("gens", gens)) if v is not None}
+    plan = dataclasses.replace(plan, **budgets)
     if plan.pop < 4 or plan.gens < 1:
         raise SettingsError("--pop must be at least 4 and --gens at least 1")
     settings = load_settings(config).replace(search={"seed": seed})
@@ -765,7 +779,7 @@ def _calib_entries(path: Path) -> dict:
     cam = dict(cam)
     if isinstance(cam.get("mask"), str):
         cam["mask"] = str((path.parent / cam["mask"]).resolve())
-    entries = {"camera": cam}
+    entries: dict[str, Any] = {"camera": cam}
     if data.get("T_cam_lidar") is not None:
         from .geometry import check_rigid
 
@@ -888,7 +902,9 @@ def _report(line: str) -> None:
 
 def _interrupted(command: str | None) -> int:
     if not _STOP.reported:
-        _report(f"paretocal: {_INTERRUPTED.get(command, 'interrupted; run the command again')}")
+        default = "interrupted; run the command again"
+        said = default if command is None else _INTERRUPTED.get(command, default)
+        _report(f"paretocal: {said}")
     return 130
 
 

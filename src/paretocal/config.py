@@ -173,12 +173,13 @@ class Settings:
             if not values:
                 continue
             current = getattr(out, name, None)
-            if dataclasses.is_dataclass(current):
+            if dataclasses.is_dataclass(current) and not isinstance(current, type):
                 values = _renamed(name, values)
                 _check_keys(type(current), values, name)
                 values = {k: _coerce(f"{name}.{k}", v, _field_types(type(current))[k])
                           for k, v in values.items()}
-                out = dataclasses.replace(out, **{name: dataclasses.replace(current, **values)})
+                section: dict[str, Any] = {name: dataclasses.replace(current, **values)}
+                out = dataclasses.replace(out, **section)
             else:
                 raise SettingsError(f"unknown settings section {quote(name)}")
         return out
@@ -203,8 +204,8 @@ class Settings:
                 v = getattr(section, fl.name)
                 if isinstance(v, float) and not math.isfinite(v):
                     raise SettingsError(f"{_option(fl.name)} {v}: must be a finite number")
-        for (section, name), allowed in CHOICES.items():
-            value = getattr(getattr(self, section), name)
+        for (section_name, name), allowed in CHOICES.items():
+            value = getattr(getattr(self, section_name), name)
             if value not in allowed:
                 raise SettingsError(f"{_option(name)} {quote(value)}: choose "
                                     f"{', '.join(allowed[:-1])} or {allowed[-1]}")
@@ -542,7 +543,8 @@ def settings_from_mapping(data: dict, name: str = "settings",
         raise SettingsError(f"{name}: unknown section(s) {key_list(unknown)} "
                             f"(known: {', '.join(sorted(top))})")
     types = _field_types(Settings)
-    sections, scalars = {}, {}
+    sections: dict[str, dict] = {}
+    scalars: dict[str, Any] = {}
     for k, v in data.items():
         is_section = dataclasses.is_dataclass(getattr(settings, k))
         if is_section and not isinstance(v, dict):

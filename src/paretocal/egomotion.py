@@ -625,7 +625,8 @@ def image_features(images: Sequence[np.ndarray], camera: Camera, indices=None, *
     """SIFT features of the images of index ``indices`` (all by default) as
     :func:`camera_odometry` matches them: by index, the unit rays (M, 3) of the keypoints
     within ``max_ray_deg`` of the optical axis and their descriptors (M, 128)."""
-    sift = cv2.SIFT_create(nfeatures=int(features))
+    # OpenCV's stubs declare SIFT only as the class SIFT, not its module-level factory.
+    sift = cv2.SIFT_create(nfeatures=int(features))  # type: ignore[attr-defined]
     cos_max = math.cos(math.radians(max_ray_deg))
     out = {}
     for k in range(len(images)) if indices is None else indices:
@@ -970,9 +971,11 @@ def rotation_from_motion(lidar: LidarOdometry, camera: Sequence[CameraPair],
     """
     R0 = np.asarray(R_init, dtype=np.float64)
     tX = np.zeros(3) if t_init is None else np.asarray(t_init, dtype=np.float64)
-    a, b, w = [], [], []
+    a_rows: list[np.ndarray] = []
+    b_rows: list[np.ndarray] = []
+    w_rows: list[float] = []
     n_dir = n_turn = n_rev = 0
-    reasons = []
+    reasons: list[str] = []
     for c in camera:
         T, C = lidar.relative(c.i, c.j)
         if not np.isfinite(T).all():
@@ -996,9 +999,9 @@ def rotation_from_motion(lidar: LidarOdometry, camera: Sequence[CameraPair],
                 step = tr * c.direction / np.linalg.norm(c.direction) - (np.eye(3) - Rc) @ tX
                 turn = math.radians(rotation_angle_deg(Rc))
                 sig_arm = turn * math.sqrt(3.0) * t_sigma_m / tr
-                a.append(d_l)
-                b.append(step / np.linalg.norm(step))
-                w.append(1.0 / (sig_l ** 2 + sig_c ** 2 + sig_arm ** 2 + 1e-12))
+                a_rows.append(d_l)
+                b_rows.append(step / np.linalg.norm(step))
+                w_rows.append(1.0 / (sig_l ** 2 + sig_c ** 2 + sig_arm ** 2 + 1e-12))
                 n_dir += 1
         if c.rotation_ok:
             rv_l, rv_c = _rotvec(T[:3, :3]), _rotvec(c.R)
@@ -1008,16 +1011,16 @@ def rotation_from_motion(lidar: LidarOdometry, camera: Sequence[CameraPair],
                                   if np.isfinite(c.rotation_sigma_deg) else 1.0)
             sig = math.hypot(sig_rl, sig_rc)
             if ang > MIN_TURN_SIGMAS * sig and np.linalg.norm(rv_c) > 0:
-                a.append(rv_l / ang)
-                b.append(rv_c / np.linalg.norm(rv_c))
-                w.append((ang / sig) ** 2)          # the axis's angular variance: (sig / ang)^2
+                a_rows.append(rv_l / ang)
+                b_rows.append(rv_c / np.linalg.norm(rv_c))
+                w_rows.append((ang / sig) ** 2)          # the axis's angular variance: (sig / ang)^2
                 n_turn += 1
-    if not a:
+    if not a_rows:
         reasons.append("no pair gives a direction of travel or a clear turn that both sensors "
                        "resolve (standing, too little parallax, or no camera pairs)")
         return MotionRotation(R0.copy(), None, np.full(3, np.inf), 0, 0, n_rev, float("nan"),
                               0.0, reasons)
-    a, b, w = np.array(a), np.array(b), np.array(w)
+    a, b, w = np.array(a_rows), np.array(b_rows), np.array(w_rows)
     # Information about a small rotation phi (camera frame) of R: each vector b with weight w
     # constrains the components of phi across it: sum w (I - b b^T).
     info = sum(wk * (np.eye(3) - np.outer(bk, bk)) for wk, bk in zip(w, b))
@@ -1049,7 +1052,7 @@ def rotation_from_motion(lidar: LidarOdometry, camera: Sequence[CameraPair],
     res = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", (R @ a[keep].T).T, b[keep]),
                                        -1.0, 1.0)))
     var = (V ** 2 / np.maximum(ev, 1e-300)[None, :]).sum(axis=1)      # rad^2 per camera axis
-    sig = np.degrees(np.sqrt(var))
-    sig = np.where(sig > 180.0, np.inf, sig)
-    return MotionRotation(R, free, sig, n_dir, n_turn, n_rev,
+    sig_deg = np.degrees(np.sqrt(var))
+    sig_deg = np.where(sig_deg > 180.0, np.inf, sig_deg)
+    return MotionRotation(R, free, sig_deg, n_dir, n_turn, n_rev,
                           float(np.sqrt(np.mean(res ** 2))), rotation_angle_deg(R @ R0.T), reasons)

@@ -7,6 +7,7 @@ stderr; anything else is a bug and exits 1.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 #: Characters of a file's content that one error message quotes at most: enough to recognise
 #: a key, a value or the start of a line, too few to copy a file out through messages, which
@@ -117,6 +118,9 @@ class Interrupted(Exception):
         non-dominated set once the search has run.
     checkpoint : path or None
         The saved search state a resume continues from, when there is one.
+    run_dir : path or None
+        The run folder to resume, set by a caller that runs several (a rig's cameras); None
+        when it is the folder the command was given.
     """
 
     def __init__(self, phase: str, generation: int | None = None, X=None, F=None,
@@ -124,6 +128,7 @@ class Interrupted(Exception):
         super().__init__(f"interrupted while {phase}")
         self.phase, self.generation = phase, generation
         self.X, self.F, self.checkpoint = X, F, checkpoint
+        self.run_dir: Path | None = None
 
 
 class StopRequest:

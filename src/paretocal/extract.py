@@ -329,10 +329,11 @@ def _write(bag: Bag, staging: Path, topics: tuple[str, str, str], pairing, stems
             continue
         where = f"{bag.path}: topic {cloud_topic!r}, cloud {k} (stamp {stamp_ns(msg)})"
         points = cloud_array(msg, where)
-        missing = [c for c in "xyz" if c not in {n.lower() for n in points.dtype.names}]
+        fields = points.dtype.names or ()            # a structured array: () when no field
+        missing = [c for c in "xyz" if c not in {n.lower() for n in fields}]
         if missing:
             raise InputError(f"{where}: no {', '.join(missing)} field (fields: "
-                             f"{key_list(points.dtype.names)})")
+                             f"{key_list(fields)})")
         path = staging / "points" / f"{by_cloud[k]}.npy"
         with open(path, "wb") as fh:
             np.save(fh, points, allow_pickle=False)

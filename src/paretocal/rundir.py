@@ -244,7 +244,7 @@ class _RunCheckpoint(Checkpoint):
 
     def __init__(self, path: Path, every: int, args: dict):
         super().__init__(path, every)
-        self.args = args
+        self.args: dict | None = args          # None once written
 
     def save(self, state, history: list) -> None:
         if self.args is not None:
@@ -327,17 +327,18 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
                     progress("writing", 0, 1)
                 publish_run(result, out, result.sweeps or frames, figures=figures, args=args)
             except KeyboardInterrupt:
-                raise Interrupted("writing the results", result.history[-1]["gen"],
-                                  result.nsga_front[0], result.nsga_front[1]) from None
+                X, F = result.nsga_front if result.nsga_front is not None else (None, None)
+                raise Interrupted("writing the results", result.history[-1]["gen"], X, F) from None
         except Interrupted as exc:
             if exc.X is not None:
                 atomic_write_text(out / PARTIAL_FRONT, partial_front_csv(exc.X, exc.F))
             # Resumable when the search state and the run's arguments are on disk (an
             # interrupt before the first checkpoint leaves the folder as it was; a folder of
             # the previous release keeps them in run_args.json).
-            on_disk = (ckpt is not None and Path(ckpt.path).is_file()
-                       and ((out / CHECKPOINT_ARGS).is_file() or (out / RUN_ARGS).is_file()))
-            exc.checkpoint = Path(ckpt.path) if on_disk else None
+            exc.checkpoint = None
+            if (ckpt is not None and Path(ckpt.path).is_file()
+                    and ((out / CHECKPOINT_ARGS).is_file() or (out / RUN_ARGS).is_file())):
+                exc.checkpoint = Path(ckpt.path)
             raise
         # A finished run needs no checkpoint (nor one an earlier run left); run_args.json
         # records its arguments.
@@ -369,9 +370,13 @@ def run_arguments(run_dir: str | Path) -> dict:
     path = next((run_dir / n for n in (CHECKPOINT_ARGS, RUN_ARGS)
                  if os.path.lexists(run_dir / n)), None)
     if path is None:
-        runs = ({p.parent.name: _rig_camera_of(p) for n in (RUN_ARGS, CHECKPOINT_ARGS)
-                 for p in run_dir.glob(f"*/{n}") if _rig_camera_of(p) is not None}
-                if run_dir.is_dir() else {})
+        runs: dict[str, str] = {}
+        if run_dir.is_dir():
+            for n in (RUN_ARGS, CHECKPOINT_ARGS):
+                for p in run_dir.glob(f"*/{n}"):
+                    camera = _rig_camera_of(p)
+                    if camera is not None:
+                        runs[p.parent.name] = camera
         if runs:
             first = sorted(runs)[0]
             one = "the cameras at once" if "," in runs[first] else "one camera"

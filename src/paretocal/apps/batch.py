@@ -33,6 +33,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from ..errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
 from ..io.atomic import atomic_path, atomic_write_text
@@ -108,9 +109,10 @@ def read_manifest(path: str | Path) -> list[Entry]:
             doc = load_yaml(text, path)      # refuses alias bombs and duplicate keys, naming it
         except yaml.YAMLError as exc:
             raise yaml_error(path, exc) from None
-        rows = doc.get("entries") if isinstance(doc, dict) else doc
-        if not isinstance(rows, list):
+        listed = doc.get("entries") if isinstance(doc, dict) else doc
+        if not isinstance(listed, list):
             raise InputError(f"{path}: expected a list of entries (or a mapping with 'entries')")
+        rows = listed
     known = set(Entry.__dataclass_fields__)
     entries, seen = [], set()
     for k, row in enumerate(rows):
@@ -128,7 +130,8 @@ def read_manifest(path: str | Path) -> list[Entry]:
         for key in ("id", "source"):
             if key not in row:
                 raise InputError(f"{where}: missing '{key}'")
-        fields = {key: _field(where, key, v) for key, v in row.items()}
+        # An Entry's fields, each of its own type (text; an integer camera).
+        fields: dict[str, Any] = {key: _field(where, key, v) for key, v in row.items()}
         eid = fields["id"]
         if not _ID.match(eid):
             raise InputError(f"{where}: id {quote(eid)} must be letters, digits, '_', '-' or '.'")
@@ -179,7 +182,8 @@ def _csv_rows(path: Path, text: str) -> list[dict]:
     try:
         for row in reader:
             if None in row:                    # DictReader's key for values beyond the header
-                raise InputError(f"{path}: line {reader.line_num}: {len(reader.fieldnames)} "
+                header = reader.fieldnames or ()       # read with the first row
+                raise InputError(f"{path}: line {reader.line_num}: {len(header)} "
                                  f"columns in the header, more values in this row")
             rows.append({k.strip(): v.strip() if isinstance(v, str) else v
                          for k, v in row.items()})
@@ -405,6 +409,9 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
                 args=run_record(entry.source, T_init, settings, figures))
     drift = pose_error(result.T_cam_lidar, result.T_init)
     ref = result.reference_error or {}
+    rel = result.reliability
+    if rel is None:                     # the pipeline judges every result it returns
+        raise ParetocalError(f"{run_dir}: the result carries no verdict")
     record = {**asdict(entry), "status": "ok", "reason": "",
               "T_cam_lidar": result.T_cam_lidar, "n_points": result.n_points,
               "drift_rotation_deg": float(drift["rotation_deg"]),
@@ -413,8 +420,8 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
               "ref_translation_cm": ref.get("translation_cm"),
               "chamfer": result.objectives()["chamfer"],
               "ms_per_eval": result.objectives().get("ms"),
-              "reliability": result.reliability["verdict"],
-              "reliability_reason": "; ".join(result.reliability["reasons"])}
+              "reliability": rel["verdict"],
+              "reliability_reason": "; ".join(rel["reasons"])}
     if check:
         c = check_extrinsic(frames, result.T_init, settings)
         record.update({"check_verdict": c["verdict"], "check_score": c["score"]})
@@ -527,10 +534,10 @@ def run_batch(manifest: str | Path, out_dir: str | Path, settings=None,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     prints = {e.id: entry_fingerprint(e, by_entry[e.id], check, figures) for e in entries}
-    done = {}
+    done: dict[str, dict] = {}
     for e in entries:
         rec = read_record(out / "runs" / e.id)
-        if is_done(rec, prints[e.id]):
+        if rec is not None and is_done(rec, prints[e.id]):
             done[e.id] = rec
     pending = [e for e in entries if e.id not in done]
     records = dict(done)

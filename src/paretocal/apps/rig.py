@@ -32,6 +32,7 @@ import logging
 import time
 from itertools import combinations
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -181,7 +182,7 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
     """rig.json's content for a joint run: every camera's extrinsic (its mount on the first
     camera's result) and the name of the file :func:`write_joint_summary` writes it to, the
     shared verdict and intervals; no pairs (their relative poses are calib.yaml's)."""
-    mounts = {}
+    mounts: dict[str, np.ndarray] = {}
     for f in result.sweeps or []:
         mounts.setdefault(joint_camera(f.name),
                           np.eye(4) if f.camera.mount is None else f.camera.mount)
@@ -268,8 +269,9 @@ def consistency(a: CalibrationResult, b: CalibrationResult, T_pair: np.ndarray,
     hb = ((b.reliability or {}).get("intervals") or {}).get("half_width") or {}
     limit = {ax: (None if ha.get(ax) is None or hb.get(ax) is None
                   else round(float(np.hypot(ha[ax], hb[ax])), 4)) for ax in AXES}
-    checked = [ax for ax in AXES if limit[ax] is not None]
-    beyond = [ax for ax in checked if abs(diff[ax]) > limit[ax]]
+    bounds = {ax: v for ax, v in limit.items() if v is not None}     # in AXES' order
+    checked = list(bounds)
+    beyond = [ax for ax, v in bounds.items() if abs(diff[ax]) > v]
     out = {"against": against, "frame": "lidar", "difference": diff, "units": units,
            "limit_95": limit, "axes_checked": checked}
     if not checked:
@@ -292,8 +294,9 @@ def pair_record(na: str, a: CalibrationResult, nb: str, b: CalibrationResult,
     """One pair's entry of rig.json (module docstring)."""
     T_ab = a.T_cam_lidar @ invert(b.T_cam_lidar)
     init = a.T_init @ invert(b.T_init)
-    rec = {"cameras": [na, nb], "T_a_b": _matrix(T_ab), "T_a_b_initial": _matrix(init),
-           "vs_initial": _err(T_ab, init), "T_a_b_reference": None, "vs_reference": None}
+    rec: dict[str, Any] = {
+        "cameras": [na, nb], "T_a_b": _matrix(T_ab), "T_a_b_initial": _matrix(init),
+        "vs_initial": _err(T_ab, init), "T_a_b_reference": None, "vs_reference": None}
     # calib.yaml's extrinsics: the reference when the runs started elsewhere, else the start.
     ref_a = a.T_ref if a.T_ref is not None else a.T_init
     ref_b = b.T_ref if b.T_ref is not None else b.T_init

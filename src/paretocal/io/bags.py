@@ -24,6 +24,7 @@ import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -31,6 +32,9 @@ import numpy as np
 from ..errors import InputError, ParetocalError, SettingsError, first_line, quote
 from .paths import kind_of
 from .images import check_image_size, image_header_size
+
+if TYPE_CHECKING:                      # an optional dependency, imported where bags are read
+    from rosbags.highlevel import AnyReader
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +131,7 @@ class Bag:
     def __init__(self, path: str | Path):
         require_rosbags()
         self.path = Path(path)
-        self._reader = None
+        self._reader: AnyReader | None = None
         if not self.path.exists():
             raise InputError(f"{self.path}: bag not found")
         if not (self.path.is_file() or self.path.is_dir()):    # a FIFO would block the reader
@@ -148,28 +152,37 @@ class Bag:
         tries = [self.path]
         if not ros1 and self.path.is_file() and (self.path.parent / "metadata.yaml").is_file():
             tries.append(self.path.parent)
-        first = None
+        unreadable: tuple[type[BaseException], ...] = (*_bag_errors(), OSError, KeyError,
+                                                       ValueError)
+        failures: list[BaseException] = []
         for path in tries:
             try:
                 reader = AnyReader([path], default_typestore=store)
                 reader.open()
-            except (*_bag_errors(), OSError, KeyError, ValueError) as exc:
-                first = first or exc
+            except unreadable as exc:
+                failures.append(exc)
                 continue
             self._reader = reader
             return self
-        raise InputError(f"{self.path}: not a readable ROS bag ({first_line(first)})")
+        raise InputError(f"{self.path}: not a readable ROS bag ({first_line(failures[0])})")
 
     def __exit__(self, *exc) -> None:
         if self._reader is not None:
             self._reader.close()
             self._reader = None
 
+    def _open_reader(self) -> AnyReader:
+        """The reader of the open bag; a bag is read inside its ``with`` block."""
+        if self._reader is None:
+            raise ParetocalError(f"{self.path}: the bag is not open (read it inside "
+                                 "'with Bag(path) as bag')")
+        return self._reader
+
     @property
     def topics(self) -> dict[str, Topic]:
         """The bag's topics by name."""
         return {name: Topic(name, info.msgtype or "(mixed types)", int(info.msgcount))
-                for name, info in self._reader.topics.items()}
+                for name, info in self._open_reader().topics.items()}
 
     def describe_topics(self) -> str:
         """The topics in words for an error message: ``/a (sensor_msgs/msg/Image, 3), ...``."""
@@ -201,9 +214,9 @@ class Bag:
         """The names of the topics holding one of ``msgtypes``."""
         return [t.name for t in self.topics.values() if t.msgtype in msgtypes]
 
-    def messages(self, topic: str) -> Iterator[tuple[int, object]]:
+    def messages(self, topic: str) -> Iterator[tuple[int, Any]]:
         """``(time recorded in ns, message)`` of every message on ``topic``, in bag order."""
-        reader = self._reader
+        reader = self._open_reader()
         conns = [c for c in reader.connections if c.topic == topic]
         errors = _bag_errors()
         try:

@@ -44,6 +44,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -229,6 +230,7 @@ def read_cloud(path: Path, bin_layout: str | None = None) -> Cloud:
     require_file(path, "point cloud file")
     suffix = path.suffix.lower()
     notes: list[str] = []
+    used: str | None
     try:
         require_size(path, MAX_CLOUD_BYTES, "point cloud file")
         if suffix == ".bin":
@@ -309,9 +311,9 @@ def _assemble(path: Path, cols: dict[str, np.ndarray], fmt: str, layout: str | N
     if len(pts) == 0:
         raise InputError(f"{path}: the point cloud is empty")
     unit = None
-    if ring is not None:
+    if r_name is not None and ring is not None:         # a field is picked with its name
         ring = _ring_numbers(path, r_name, ring)
-    if time is not None:
+    if t_name is not None and time is not None:
         time, unit = _seconds(path, t_name, time, notes)
     fields = {"intensity": i_name, "ring": r_name, "time": t_name, "time_unit": unit,
               "format": fmt, "layout": layout, "warnings": notes}
@@ -356,6 +358,7 @@ def _seconds(path: Path, name: str, col: np.ndarray,
     if col.dtype.kind not in "iuf":
         raise InputError(f"{path}: field {quote(name)} has type {col.dtype}; expected numbers")
     integer = col.dtype.kind in "iu"
+    span: float
     if integer:
         span = int(col.max()) - int(col.min())            # exact, even for 64-bit epochs
     else:
@@ -431,7 +434,7 @@ def _read_bin(path: Path, raw: bytes, declared: str | None) -> tuple[dict[str, n
                              "file is KITTI's")
     _check_points(path, size // BIN_LAYOUTS[name].record_bytes, size, f"its size ({name} layout)")
     arr = np.frombuffer(raw, dtype=BIN_LAYOUTS[name].dtype)
-    return {c: arr[c] for c in arr.dtype.names}, name
+    return {c: arr[c] for c, _ in BIN_LAYOUTS[name].columns}, name
 
 
 def _check_points(path: Path, n: int, nbytes: int, source: str) -> None:
@@ -454,7 +457,7 @@ def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
     fields, coordinates among them, so a KITTI file never passes; coordinates that are whole
     numbers (synthetic or zeroed clouds) prove nothing either way, hence the second condition.
     """
-    if "ring" not in lay.dtype.names or len(raw) % lay.record_bytes:
+    if "ring" not in [n for n, _ in lay.columns] or len(raw) % lay.record_bytes:
         return False
     arr = np.frombuffer(raw, dtype=lay.dtype)
     if len(arr) < _MIN_LAYOUT_EVIDENCE:
@@ -521,9 +524,13 @@ def _npy_header(path: Path) -> None:
             raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
         fh.seek(0)
         version = fmt.read_magic(fh)
-        read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}.get(
-            version, lambda f: fmt._read_array_header(f, version))
-        shape, _, dtype = read(fh)
+        if version == (1, 0):
+            shape, _, dtype = fmt.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, _, dtype = fmt.read_array_header_2_0(fh)
+        else:
+            # Private and undeclared; numpy < 2 only (numpy 2 keeps it in lib._format_impl).
+            shape, _, dtype = fmt._read_array_header(fh, version)  # type: ignore[attr-defined]
         have = os.fstat(fh.fileno()).st_size - fh.tell()
     if dtype.hasobject:
         return                                  # np.load refuses objects (allow_pickle=False)
@@ -556,14 +563,14 @@ def _ascii_column(col: np.ndarray, dtype: str) -> np.ndarray:
     column that does not hold whole numbers in the type's range stays float64, for the ring
     and time checks to name.
     """
-    dtype = np.dtype(dtype)
-    if dtype.kind not in "iu" or len(col) == 0:
+    target = np.dtype(dtype)
+    if target.kind not in "iu" or len(col) == 0:
         return col
-    info = np.iinfo(dtype)
+    info = np.iinfo(target)
     if not (np.isfinite(col).all() and (col == np.round(col)).all()
             and info.min <= col.min() and col.max() <= info.max):
         return col
-    return col.astype(dtype)
+    return col.astype(target)
 
 
 
@@ -736,15 +743,18 @@ def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
     head = (f"FIELDS {' '.join(f'f{j}' for j in range(k))}\nSIZE {' '.join(map(str, sizes))}\n"
             f"TYPE {' '.join(types)}\nCOUNT {' '.join(map(str, counts))}\nWIDTH {n}\nHEIGHT 1\n"
             f"POINTS {n}\nDATA binary_compressed\n")
+    # pypcd4 annotates a BufferedReader, and reads any binary file object.
+    stream = cast(io.BufferedReader, io.BytesIO(head.encode() + body))
     try:
-        arr = PointCloud.from_fileobj(io.BytesIO(head.encode() + body)).pc_data
+        arr = PointCloud.from_fileobj(stream).pc_data
     except Exception as exc:  # any decoder failure means a corrupt file
         raise InputError(f"{path}: PCD binary_compressed data cannot be decoded "
                          f"({first_line(exc)}); the file is truncated or corrupt") from None
-    if arr.ndim != 1 or len(arr) != n or len(arr.dtype.names or ()) != sum(counts):
+    names = arr.dtype.names
+    if arr.ndim != 1 or len(arr) != n or names is None or len(names) != sum(counts):
         raise InputError(f"{path}: PCD binary_compressed data holds {arr.size} points, the header "
                          f"says POINTS {n}")
-    return [arr[name] for name in arr.dtype.names]
+    return [arr[name] for name in names]
 
 
 # --- PLY ------------------------------------------------------------------------------------------

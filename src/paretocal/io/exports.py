@@ -44,10 +44,11 @@ def kitti_rect_of(frames) -> np.ndarray | None:
     (KITTI object frames from different drives): no single KITTI ``Tr`` then exists.
     """
     rects = [getattr(f, "kitti_rect", None) for f in frames or []]
-    if not rects or any(r is None for r in rects):
+    found = [r for r in rects if r is not None]
+    if not rects or len(found) < len(rects):
         return None
-    first = np.asarray(rects[0], dtype=np.float64)
-    if any(not np.allclose(r, first, rtol=0, atol=1e-12) for r in rects[1:]):
+    first = np.asarray(found[0], dtype=np.float64)
+    if any(not np.allclose(r, first, rtol=0, atol=1e-12) for r in found[1:]):
         return None
     return first
 

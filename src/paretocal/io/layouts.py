@@ -11,6 +11,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -207,7 +208,7 @@ _MODELS = {"pinhole": "pinhole", "radtan": "pinhole", "plumb_bob": "pinhole",
 _OPENCV_D_SIZES = (4, 5, 8, 12, 14)
 
 
-def _intrinsics(path: Path, where: dict[str, str], K, width, height, D, model,
+def _intrinsics(path: str | Path, where: dict[str, str], K, width, height, D, model,
                 xi=None) -> Camera:
     """Validate intrinsics read from ``path``; ``where`` maps a role to the key that held it.
 
@@ -264,7 +265,7 @@ def _intrinsics(path: Path, where: dict[str, str], K, width, height, D, model,
                   xi=xi if kind == "mei" else 0.0)
 
 
-def _numbers(path: Path, name: str, value) -> np.ndarray:
+def _numbers(path: str | Path, name: str, value) -> np.ndarray:
     """``value`` as a float64 array, or an InputError naming ``name`` in ``path``."""
     try:
         return np.asarray(value, dtype=np.float64)
@@ -275,7 +276,7 @@ def _numbers(path: Path, name: str, value) -> np.ndarray:
         raise InputError(f"{path}: {name} is not a list of numbers ({text})") from None
 
 
-def _size(path: Path, name: str, value) -> int:
+def _size(path: str | Path, name: str, value) -> int:
     """An image dimension: a positive whole number of pixels."""
     try:
         v = float(value.strip()) if isinstance(value, str) else value
@@ -289,7 +290,7 @@ def _size(path: Path, name: str, value) -> int:
     return int(v)
 
 
-def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np.ndarray | None:
+def _ros_matrix(path: str | Path, info: dict, key: str, prefix: str, shape=None) -> np.ndarray | None:
     """A ROS camera_info matrix ``{rows, cols, data}``; None when the key is absent."""
     m = info.get(key)
     if m is None:
@@ -315,7 +316,7 @@ def _ros_matrix(path: Path, info: dict, key: str, prefix: str, shape=None) -> np
     return data.reshape(rows, cols)
 
 
-def _camera_info(path: Path, info: dict, prefix: str = "") -> Camera:
+def _camera_info(path: str | Path, info: dict, prefix: str = "") -> Camera:
     """Intrinsics from a ROS ``camera_info`` mapping (camera_calibration_parsers' YAML form).
 
     Uses ``camera_matrix`` and the distortion (and ``xi`` for a Mei model, a key ROS itself
@@ -348,7 +349,7 @@ def _is_message(info: dict) -> bool:
                                                                      "p", "P"))
 
 
-def _camera_info_message(path: Path, info: dict, prefix: str = "") -> Camera:
+def _camera_info_message(path: str | Path, info: dict, prefix: str = "") -> Camera:
     """Intrinsics from a sensor_msgs/CameraInfo message as ``rostopic echo`` (``K``, ``D``,
     ``P``) or ``ros2 topic echo`` (``k``, ``d``, ``p``) prints it: ``K`` row-major 3x3 (9
     numbers), or, where ``K`` is absent or all zeros, the left 3x3 of ``P`` (3x4, 12 numbers);
@@ -388,7 +389,7 @@ def _camera_info_message(path: Path, info: dict, prefix: str = "") -> Camera:
                        model, info.get("xi"))
 
 
-def _folder_camera(root: Path, cpath: Path, data: dict) -> Camera:
+def _folder_camera(root: Path, cpath: str | Path, data: dict) -> Camera:
     """The camera of a generic folder: ``camera`` in calib.yaml, or a ROS camera_info file."""
     if data.get("camera_info") is not None:
         if data.get("camera") is not None:
@@ -518,7 +519,7 @@ RIG_KEYS = ("cameras", "lidar_pose", "points", "init_error", "credit")
 CAMERA_KEYS = ("K", "width", "height", "model", "D", "xi", "mask")
 
 
-def check_keys(cpath: Path, mapping: dict, allowed, where: str = "") -> None:
+def check_keys(cpath: str | Path, mapping: dict, allowed, where: str = "") -> None:
     """An :class:`InputError` naming the file, where in it, the keys ``mapping`` holds that
     are not ``allowed`` and the allowed ones: a typo (``widht``) is named as such, not
     reported as a missing key."""
@@ -631,8 +632,9 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
     if clash:
         raise InputError(f"{cpath}: {', '.join(clash)} at the top level and 'cameras' both "
                          "given; with several cameras each entry of cameras holds its own")
-    shared = {"pose": None, "layout": _points_layout(cpath, data.get("points")),
-              "options": _options(cpath, data), "credit": _credit(cpath, data)}
+    shared: dict[str, Any] = {
+        "pose": None, "layout": _points_layout(cpath, data.get("points")),
+        "options": _options(cpath, data), "credit": _credit(cpath, data)}
     if data.get("lidar_pose") is not None:
         shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
     return [(name, _rig_camera(root, cpath, name, entry, shared)) for name, entry in entries]
@@ -848,7 +850,7 @@ def _read_selected(src: Source, frames: str | None, clouds: dict | None) -> list
     out = [read_frame(src.frames[i], clouds) for i in idx]
     # The readers note what they could not find (no intensity field, an odd time unit) per
     # file; say each thing once per source.
-    notes = {}
+    notes: dict[str, Path] = {}
     for f in out:
         for w in f.point_fields.get("warnings", ()):
             notes.setdefault(w, f.points_path)

@@ -131,7 +131,7 @@ def overlay_figure(frame: Frame, T: np.ndarray, path: Path, title: str,
     """The frame's image with every LiDAR return in view drawn at its projection, by depth."""
     h, w = frame.image.shape[:2]
     fig = new_figure(figsize=(w / 100, h / 100 + 0.45), dpi=100)
-    ax = fig.add_axes([0, 0, 1, h / (h + 45)])
+    ax = fig.add_axes((0, 0, 1, h / (h + 45)))
     k = draw_overlay(ax, frame, T, z_min, max_depth)
     fig.text(0.01, 1 - 0.3 * 45 / (h + 45), title, fontsize=11, va="center")
     fig.text(0.99, 1 - 0.3 * 45 / (h + 45), f"{k} points in view, colour = depth "

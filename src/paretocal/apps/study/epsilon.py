@@ -9,6 +9,7 @@ them lies clearly below it, and they should lie on it.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from pymoo.algorithms.soo.nonconvex.ga import GA
@@ -72,7 +73,7 @@ def epsilon_constraint(objective, eps_values, xl: np.ndarray, xu: np.ndarray, po
         ``evaluations``, ``wall_s``.
     """
     xl, xu = np.asarray(xl, float), np.asarray(xu, float)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for k, eps in enumerate(eps_values):
         t0 = time.perf_counter()
         problem = EpsilonProblem(objective, eps, xl, xu)
@@ -106,9 +107,10 @@ def epsilon_constraint(objective, eps_values, xl: np.ndarray, xu: np.ndarray, po
             if fP[0] < f_x:
                 x = P[0]
         F = objective.evaluate(x[None])[0]
-        row = {"eps": float(eps), "feasible": bool(F[1] <= eps + 1e-12), "x": x,
-               "f1": float(F[0]), "f2": float(F[1]), "f1_ga": f_ga, "evaluations": evals,
-               "wall_s": time.perf_counter() - t0}
+        row: dict[str, Any] = {
+            "eps": float(eps), "feasible": bool(F[1] <= eps + 1e-12), "x": x,
+            "f1": float(F[0]), "f2": float(F[1]), "f1_ga": f_ga, "evaluations": evals,
+            "wall_s": time.perf_counter() - t0}
         if F_front is not None:
             row["front_f1"] = front_f1_at(F_front, eps)
             row["gap"] = row["f1"] - row["front_f1"]

@@ -30,7 +30,7 @@ import numpy as np
 
 from ... import __version__
 from ...config import Settings
-from ...errors import InputError
+from ...errors import InputError, ParetocalError
 from ...geometry import pose_error
 from ...io.atomic import atomic_write_text
 from ...io.layouts import load_frames
@@ -150,7 +150,9 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     write_run(result, out / "calibration", frames)
     timings["calibration"] = time.perf_counter() - t0
     tick("pareto_front")
-    obj = result.objective
+    obj, nsga_front = result.objective, result.nsga_front
+    if obj is None or nsga_front is None:      # the pipeline returns both
+        raise ParetocalError("the calibration kept no objective or search front to study")
     F, X, cols = result.front.F, result.front.X, result.front.columns
     n_lo, n_hi = result.n_range
     xl, xu = bounds(settings.search, n_lo, n_hi)
@@ -165,7 +167,7 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
         list(VARIABLES) + ["f1", "f2", "ms", "bytes", "deviation_px"] + ref_keys + ["chosen"],
         front_rows))
     figs.pareto_front(result, out / "pareto_front.png")
-    Xn, Fn = result.nsga_front
+    Xn, Fn = nsga_front
     space_rows = ([["final"] + list(X[i, :6]) + [int(round(X[i, 6])), float(F[i, 0])]
                    for i in range(len(X))]
                   + [["nsga2"] + list(Xn[i, :6]) + [int(round(Xn[i, 6])), float(Fn[i, 0])]

@@ -113,7 +113,7 @@ def single_objective(chamfer, n: int, xl: np.ndarray, xu: np.ndarray, pop: int, 
     # 1 deg or 10 cm, the sizes the objective resolves.
     scale = np.array([0.1, 0.1, 0.1, 1.0, 1.0, 1.0])
     count = {"n": 0}
-    local = []
+    local: list[dict[str, float]] = []
 
     def fun(z):
         count["n"] += 1
