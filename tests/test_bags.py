@@ -139,9 +139,11 @@ class Msgs:
             distortion_model=model, binning_x=0, binning_y=0, roi=roi, **mats)
 
 
-def write_bag(path: Path, kind: str, topics: dict[str, list]) -> Path:
+def write_bag(path: Path, kind: str, topics: dict[str, list],
+              empty: dict[str, str] | None = None) -> Path:
     """A bag of ``kind`` (ros1, sqlite3, mcap) at ``path`` holding ``topics``: name -> list of
-    messages (recorded at their header stamps). Returns the path to pass to extract."""
+    messages (recorded at their header stamps), and ``empty``: name -> message type of
+    connections without messages. Returns the path to pass to extract."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import Writer as Writer2
 
@@ -160,6 +162,8 @@ def write_bag(path: Path, kind: str, topics: dict[str, list]) -> Path:
     with writer:
         conns = {name: writer.add_connection(name, ms[0].__msgtype__, typestore=msgs.store)
                  for name, ms in topics.items()}
+        for name, msgtype in (empty or {}).items():
+            writer.add_connection(name, msgtype, typestore=msgs.store)
         for ns, name, m in stamped:
             raw = (msgs.store.serialize_ros1(m, m.__msgtype__) if kind == "ros1"
                    else msgs.store.serialize_cdr(m, m.__msgtype__))
@@ -601,6 +605,17 @@ class TestBadBags:
         assert code == 0 and "camera from --calib" in stdout, err
         bad(capfd, *_extract(bag, tmp_path / "o", "--max-dt", "0.1", "--calib", calib),
             expect=f"--out {tmp_path / 'o'}: the folder is not empty")
+
+    def test_an_empty_camera_info_topic_is_named(self, tmp_path, capfd, frames):
+        msgs = Msgs(True)
+        bag = write_bag(tmp_path / "e.bag", "ros1", {
+            "/img": [msgs.image(T0, frames[0].image, "bgr8")],
+            "/pts": [msgs.cloud(T0, records(frames[0]))]},
+            empty={"/info": "sensor_msgs/msg/CameraInfo"})
+        bad(capfd, *_extract(bag, tmp_path / "o", "--max-dt", "0.1"),
+            expect=(f"{bag}: topic '/info': the CameraInfo topic holds no message; pass "
+                    "--camera-info-topic TOPIC with messages, or --calib FILE"))
+        assert not (tmp_path / "o").exists()
 
     def test_bad_options(self, tmp_path, capfd, small_bag):
         out = tmp_path / "o"

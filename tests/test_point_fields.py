@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -315,6 +316,28 @@ class TestNpy:
         np.testing.assert_array_equal(c.time, np.arange(len(sub)) * 100_000 / 1e9)
         assert c.fields == {"intensity": "reflectivity", "ring": "ring", "time": "t",
                             "time_unit": "ns", "format": "npy", "layout": None, "warnings": []}
+
+    def test_a_version_3_file_is_read(self, tmp_path, sub):
+        """numpy writes format 3.0 when a field name is not Latin-1; its header is read too."""
+        rec = np.zeros(len(sub), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("强度", "<f4")])
+        for j, c in enumerate("xyz"):
+            rec[c] = sub[:, j]
+        p = tmp_path / "a.npy"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)        # "can only be read by >= 1.17"
+            np.save(p, rec)
+        assert p.read_bytes()[6:8] == b"\x03\x00"
+        np.testing.assert_array_equal(read_cloud(p).points[:, :3], sub[:, :3])
+        data = bytearray(p.read_bytes())
+        data[6] = 7
+        p.write_bytes(bytes(data))
+        with pytest.raises(InputError, match=err_for(p, r"\.npy format version 7\.0 is not")):
+            read_cloud(p)
+        data[6] = 3
+        data[12:20] = b"{'nope':"
+        p.write_bytes(bytes(data))
+        with pytest.raises(InputError, match=err_for(p, "unreadable .npy header")):
+            read_cloud(p)
 
     def test_record_array_with_a_vector_ring_is_refused(self, tmp_path, sub):
         rec = np.zeros(10, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("ring", "u1", (2,))])

@@ -230,6 +230,10 @@ def _camera(bag: Bag, image_topic: str, info_topic: str | None,
     for _, msg in bag.messages(info_topic):
         first = msg
         break
+    if first is None:
+        raise InputError(f"{where}: the CameraInfo topic holds no message; pass "
+                         "--camera-info-topic TOPIC with messages, or --calib FILE with a "
+                         "calib.yaml camera section")
     camera = camera_from_info(first, where)
     cam = calib_camera({"camera": camera}, where)
     return camera, (cam.width, cam.height), info_topic

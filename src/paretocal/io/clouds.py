@@ -514,6 +514,19 @@ def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], 
     return {n: arr[:, j] for j, n in enumerate(names)}, declared
 
 
+def _npy_header_3_0(fh) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype of a version 3.0 ``.npy`` header (2.0's layout with UTF-8 text,
+    which numpy writes when a field name is not Latin-1; numpy has no public reader for it)."""
+    import ast
+    import struct
+
+    (size,) = struct.unpack("<I", fh.read(4))
+    header = ast.literal_eval(fh.read(size).decode("utf-8"))
+    if not isinstance(header, dict) or not isinstance(header.get("shape"), tuple):
+        raise ValueError("the header is not a dictionary with a shape")
+    return header["shape"], np.lib.format.descr_to_dtype(header["descr"])
+
+
 def _npy_header(path: Path) -> None:
     """Check what a ``.npy`` header claims before numpy allocates it: the points (records, or
     rows of a plain array) within :data:`MAX_CLOUD_POINTS`, and the data within the file (a
@@ -523,14 +536,19 @@ def _npy_header(path: Path) -> None:
         if fh.read(6) != b"\x93NUMPY":
             raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
         fh.seek(0)
-        version = fmt.read_magic(fh)
-        if version == (1, 0):
-            shape, _, dtype = fmt.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, _, dtype = fmt.read_array_header_2_0(fh)
-        else:
-            # Private and undeclared; numpy < 2 only (numpy 2 keeps it in lib._format_impl).
-            shape, _, dtype = fmt._read_array_header(fh, version)  # type: ignore[attr-defined]
+        try:
+            version = fmt.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = fmt.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = fmt.read_array_header_2_0(fh)
+            elif version == (3, 0):
+                shape, dtype = _npy_header_3_0(fh)
+            else:
+                raise InputError(f"{path}: .npy format version {version[0]}.{version[1]} is "
+                                 "not one numpy writes (1.0, 2.0 or 3.0)")
+        except (ValueError, SyntaxError, KeyError, TypeError) as exc:
+            raise InputError(f"{path}: unreadable .npy header ({exc})") from None
         have = os.fstat(fh.fileno()).st_size - fh.tell()
     if dtype.hasobject:
         return                                  # np.load refuses objects (allow_pickle=False)
