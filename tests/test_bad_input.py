@@ -455,6 +455,9 @@ def test_n_range_beyond_what_the_frames_hold(capfd, tmp_path, rig, args, expect)
     ("search: {seed: -1}\n", "--seed -1: must be 0 or more"),
     ("decision: {polish: maybe}\n", "decision.polish: expected true or false, got 'maybe'"),
     ("1: 2\n", "unknown section(s) 1"),
+    # A typo names the key and the keys allowed, in one line with the file.
+    ("serch: {pop: 3}\n", "unknown section(s) serch (known: camera, decision, features, "),
+    ("search: {popp: 3}\n", "unknown setting(s) popp in section 'search' (known: "),
 ])
 def test_bad_config_file(capfd, tmp_path, rig, text, expect):
     cfg = tmp_path / "cfg.yaml"

@@ -37,12 +37,12 @@ DEFAULT_N_MIN = 20
 
 def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                      progress=None, rings: list[Rings] | None = None,
-                     images: list | None = None) -> list[FrameFeatures]:
+                     images: list | None = None, sampling: bool = True) -> list[FrameFeatures]:
     """Features of every frame, each with its own seeded stream (independent of frame count).
 
     ``rings`` (from :func:`sweep_rings`) saves recovering each sweep's rings again, ``images``
     (the frames' ``FrameFeatures.image`` from an earlier stage with the same settings)
-    extracting the image features again.
+    extracting the image features again; ``sampling``: :func:`prepare_frame`'s.
     """
     seq = np.random.SeedSequence(settings.search.seed)
     out = []
@@ -50,7 +50,8 @@ def prepare_features(frames: list[Frame], T_init: np.ndarray, settings: Settings
         out.append(prepare_frame(frame, T_init, settings.features, settings.objective,
                                  np.random.default_rng(child),
                                  rings=None if rings is None else rings[k],
-                                 image=None if images is None else images[k]))
+                                 image=None if images is None else images[k],
+                                 sampling=sampling))
         if progress is not None:
             progress(k + 1, len(frames))
     return out
@@ -162,7 +163,8 @@ class Stage:
     :func:`check_scene`).
 
     ``images``: the image features of an earlier stage of the same frames and settings
-    (:attr:`images`), which do not depend on the pose.
+    (:attr:`images`), which do not depend on the pose. ``sampling``: measure the LiDAR's
+    sampling step in the image (:meth:`sampling_px`; a stage that only searches skips it).
 
     Attributes: ``feats`` (search part of each frame's features), ``images`` (each frame's
     image features), ``scene``, ``holdout`` (held-out scene or None), ``n_min``, ``n_max``,
@@ -172,8 +174,8 @@ class Stage:
     def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
                  settings: Settings, progress=None, rings: list[Rings] | None = None,
                  cost: CostModel | None = None, view: str | None = None,
-                 images: list | None = None):
-        feats_all = prepare_features(frames, T_view, settings, progress, rings, images)
+                 images: list | None = None, sampling: bool = True):
+        feats_all = prepare_features(frames, T_view, settings, progress, rings, images, sampling)
         self.images = [f.image for f in feats_all]
         if view is not None:
             from .geometry import pose_error

@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -331,18 +331,42 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     out.reasons += [r for r in mr.reasons if "not observed" in r]
 
     # The photo-consistency map, from a seeded sample of each sweep (projecting every return
-    # of every sweep into every frame to choose the map would cost seconds).
+    # of every sweep into every frame to choose the map would cost seconds). It is built in a
+    # thread beside the first round (numpy and OpenCV work, no parallel kernel): the rounds
+    # read it only after their search.
+    out.seconds["photo"] = 0.0                      # the thread sets it (key order kept)
+    maps = ThreadPoolExecutor(max_workers=1)
+    try:
+        photo_map = maps.submit(_photo_map, frames, lo.poses, _motion_start(mr, T0), s.seed,
+                                out)
+        _rounds(frames, rings, settings, T0, lo, pairs_out, mr, photo_map, out, progress)
+    finally:
+        maps.shutdown(wait=True)
+    return out
+
+
+def _photo_map(frames: list[Frame], poses: np.ndarray, view: np.ndarray, seed: int,
+               out: WideStart) -> PhotoScene:
+    """The photo-consistency map of :data:`PHOTO_POINTS` points seen from ``view``; stored in
+    ``out`` with its wall time."""
     t3 = time.perf_counter()
-    rng = np.random.default_rng(s.seed)
+    rng = np.random.default_rng(seed)
     per = 4 * PHOTO_POINTS // len(frames)
     sample = [f.points if len(f.points) <= per
               else f.points[np.sort(rng.choice(len(f.points), per, replace=False))]
               for f in frames]
-    scene = build_photo_scene(sample, lo.poses, [f.image for f in frames],
-                              [f.camera for f in frames], view=_motion_start(mr, T0),
-                              max_points=PHOTO_POINTS, rng=s.seed)
+    scene = build_photo_scene(sample, poses, [f.image for f in frames],
+                              [f.camera for f in frames], view=view,
+                              max_points=PHOTO_POINTS, rng=seed)
     out.seconds["photo"] = time.perf_counter() - t3
-    out.scene, out.seed = scene, int(s.seed)
+    out.scene, out.seed = scene, int(seed)
+    return scene
+
+
+def _rounds(frames, rings, settings: Settings, T0: np.ndarray, lo, pairs_out, mr,  # noqa: PLR0913
+            scene: Future[PhotoScene], out: WideStart, progress) -> None:
+    """The search's rounds (:func:`wide_start`); the pose kept in ``out.T``."""
+    s = settings.search
     # Rounds: the search from the start, then again from the pose it kept (the points are
     # chosen at the motion's rotation with the start's camera centre, so a start metres off
     # sees other points than the truth does: a second look from the first answer sees what
@@ -365,7 +389,6 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                 break
         previous = T_start
     out.T = T_start
-    return out
 
 
 def _motion_start(mr, T_start: np.ndarray) -> np.ndarray:
@@ -378,7 +401,7 @@ def _motion_start(mr, T_start: np.ndarray) -> np.ndarray:
 
 
 def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start: np.ndarray,
-                  scene, out: WideStart, progress) -> dict:
+                  scene: Future[PhotoScene], out: WideStart, progress) -> dict:
     """One round of the stratified search about ``Tm`` (the box about ``T_start``'s camera
     centre); the polished poses ``T`` (k, 4, 4), the one kept first, and what was kept.
     Sets ``out``'s basins, comparison, disagreement and ambiguity to the round's and adds to
@@ -390,7 +413,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     c0 = -T_start[:3, :3].T @ T_start[:3, 3]
     t1 = time.perf_counter()
     stage = Stage(frames, Tm, Tm, settings, rings=rings, view="the motion's rotation",
-                  images=out.images)
+                  images=out.images, sampling=False)
     out.images = stage.images
     obj = stage.objective
     n = max(1, round(SEARCH_SHARE * stage.n_max))
@@ -444,7 +467,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     order = np.argsort(f)
     Z, f = Z[order], f[order]
     T = obj.transforms(Z)
-    pc = photo_cost(scene, T)["cost"]
+    pc = photo_cost(scene.result(), T)["cost"]
     out.tried += list(T)
     out.seconds["polish"] = out.seconds.get("polish", 0.0) + time.perf_counter() - t2
     # Photo-consistency tells far basins apart where the edges can be fooled (a camera

@@ -141,7 +141,8 @@ def view_mask(frame: Frame, views, features: FeatureSettings) -> np.ndarray:
 
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
                   objective: ObjectiveSettings, rng: np.random.Generator,
-                  rings: Rings | None = None, image: ImageFeatures | None = None) -> FrameFeatures:
+                  rings: Rings | None = None, image: ImageFeatures | None = None,
+                  sampling: bool = True) -> FrameFeatures:
     """Extract, filter and order the features of one frame.
 
     Only feature points that project into the image grown by ``view_margin_px`` at ``T_init``
@@ -149,7 +150,8 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     would reward poses that pull unseen structure into the image. ``rings`` (from
     :func:`frame_rings`) saves recovering them again, ``image`` (the frame's image features
     with the same settings, from an earlier pass) computing those again: neither depends on
-    the pose.
+    the pose. ``sampling``: measure the LiDAR's sampling step in the image (the verdict's;
+    a stage that only searches leaves it None).
     """
     img = image if image is not None else image_features(
         frame.image, features.blur_sigma, features.canny_low, features.canny_high,
@@ -194,10 +196,10 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     cu = np.clip((uv[:, 0] / frame.camera.width * gx).astype(np.int64), 0, gx - 1)
     cv = np.clip((uv[:, 1] / frame.camera.height * gy).astype(np.int64), 0, gy - 1)
     order = stratified_order(group, cv * gx + cu, rng)
-    sampling = sampling_px(pts_s[near], rings.ring[near], frame.camera, T_init,
-                           frame.sensor_pose, features.z_min)
+    step = (sampling_px(pts_s[near], rings.ring[near], frame.camera, T_init, frame.sensor_pose,
+                        features.z_min) if sampling else None)
     return FrameFeatures(frame.name, frame.camera, img, xyz[order], group[order], weight[order],
-                         rings.n_rings, rings.summary(), sampling)
+                         rings.n_rings, rings.summary(), step)
 
 
 #: Rays are projected from this far (m): the image distance between neighbouring returns is
