@@ -555,6 +555,21 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
         Depth along the optical axis in metres.
     visible : ndarray of bool, shape (..., N)
         Valid for the model and inside the image.
+
+    Examples
+    --------
+    A point 10 m ahead of a camera whose optical axis is the LiDAR's x (``T_cam_lidar``
+    maps LiDAR x, y, z to camera z, -x, -y) lands on the principal point; one 1 m to its
+    left, 100 px (f / 10) left of it:
+
+    >>> import numpy as np
+    >>> from paretocal.camera import Camera, project
+    >>> cam = Camera(K=[[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]], width=1280, height=720)
+    >>> T = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+    >>> uv, z, visible = project(np.array([[10.0, 0, 0], [10.0, 1.0, 0]]), cam, T)
+    >>> print(uv, z, visible)
+    [[640. 360.]
+     [540. 360.]] [10. 10.] [ True  True]
     """
     Xc = transform_points(camera.mounted(T_cam_lidar), points)
     uv, valid = camera.project_camera_points(Xc, z_min)
