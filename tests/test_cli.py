@@ -272,3 +272,92 @@ def test_verdict_line_names_the_main_reason_and_counts_the_rest():
         "paretocal: verdict OK")
     line = verdict_line({"verdict": "unreliable", "reasons": ["a", "b", "c"], "frames": 2})
     assert line == "paretocal: verdict UNRELIABLE: a (and 2 more reasons in result.json)"
+
+
+@pytest.fixture(scope="module")
+def compare_run(tmp_path_factory, raw_date):
+    """A short calibration from a start 2 deg / 5 cm off: its start and its result.json."""
+    from paretocal.geometry import decalibrate
+    from paretocal.io import detect_source, write_extrinsic
+
+    root = tmp_path_factory.mktemp("compare")
+    init = root / "init.yaml"
+    write_extrinsic(init, decalibrate(detect_source(raw_date).frames[0].T_ref, 2.0, 0.05,
+                                      7)[0])
+    code = main(["calibrate", str(raw_date), "--init", str(init), "--out",
+                 str(root / "run"), "--quiet", "--no-figures", *FAST])
+    assert code == 0
+    return init, root / "run" / "result.json"
+
+
+class TestCompare:
+    """``paretocal compare A B [SOURCE]``: the difference per axis in A's LiDAR frame, and
+    which one the frames prefer; the figures are those result.json states for the same
+    poses."""
+
+    def test_start_and_result_match_the_correction(self, tmp_path, capsys, compare_run):
+        init, result = compare_run
+        out = tmp_path / "c.json"
+        code, stdout, err = _run(capsys, "compare", init, result, "--out", out)
+        assert code == 0, err
+        doc, res = json.loads(out.read_text()), json.loads(result.read_text())
+        for axis in ("x", "y", "z"):
+            assert doc["correction"][f"{axis}_cm"] == pytest.approx(
+                100 * res["correction"][axis], abs=1e-3)
+        for axis in ("yaw", "pitch", "roll"):
+            assert doc["correction"][f"{axis}_deg"] == pytest.approx(
+                res["correction"][axis], abs=1e-4)
+        assert doc["prefer"] is None and doc["preferences"] == [] and doc["pixels"] is None
+        lines = stdout.strip().splitlines()
+        assert len(lines) == 2 and lines[0].startswith("paretocal: B = A @ D, in A's LiDAR "
+                                                       f"frame: x {doc['correction']['x_cm']:+.2f} cm")
+        assert lines[1] == (f"paretocal: {doc['rotation_deg']:.3f} deg / "
+                            f"{doc['translation_cm']:.2f} cm apart")
+
+    def test_result_against_kittis_reference_on_the_frames(self, tmp_path, capsys, raw_date,
+                                                           compare_run):
+        _, result = compare_run
+        out = tmp_path / "c.json"
+        ref = raw_date / "calib_velo_to_cam.txt"          # KITTI's form: needs the source
+        code, stdout, err = _run(capsys, "compare", ref, result, raw_date, "--frames", "0:3",
+                                 "--out", out, "--quiet")
+        assert code == 0, err
+        doc, res = json.loads(out.read_text()), json.loads(result.read_text())
+        e = res["reference_error"]
+        for axis in ("x", "y", "z"):
+            assert doc["correction"][f"{axis}_cm"] == pytest.approx(e[f"{axis}_lidar_cm"],
+                                                                    abs=2e-3)
+        for axis in ("yaw", "pitch", "roll"):
+            assert doc["correction"][f"{axis}_deg"] == pytest.approx(e[f"{axis}_deg"], abs=2e-4)
+        assert doc["rotation_deg"] == pytest.approx(e["rotation_deg"], abs=2e-4)
+        assert doc["translation_cm"] == pytest.approx(e["translation_cm"], abs=2e-3)
+        assert doc["frames"] == ["0000000000", "0000000001", "0000000002"]
+        assert [p["view"] for p in doc["preferences"]] == ["A", "B"]
+        assert all(p["frames"] == 3 for p in doc["preferences"])
+        assert doc["prefer"] in ("A", "B", "neither") and doc["pixels"] > 0
+        assert stdout.strip().splitlines()[-1] == (f"paretocal: on 3 frame(s) of {raw_date}: "
+                                                   f"{doc['reason']}")
+
+    def test_a_clear_difference_is_preferred_and_a_tie_is_not(self, raw_date):
+        """2 deg of yaw off the reference: every frame prefers the reference; the reference
+        against itself: neither."""
+        from paretocal.check import compare_extrinsics
+        from paretocal.geometry import apply_correction
+        from paretocal.io import load_frames
+
+        frames = load_frames(raw_date, "0:4", 2)
+        T = frames[0].T_ref
+        far = compare_extrinsics(T, apply_correction(T, [0, 0, 0, 2.0, 0, 0]), frames)
+        assert far.prefer == "A" and "the frames prefer A" in far.reason
+        assert all(p.frames_b_better == 0 and p.p_a < 0.01 for p in far.preferences)
+        assert far.rotation_deg == pytest.approx(2.0) and far.translation_m == pytest.approx(0)
+        same = compare_extrinsics(T, T, frames)
+        assert same.prefer == "neither" and same.pixels == pytest.approx(0.0, abs=1e-9)
+
+    def test_bad_input_exits_2(self, tmp_path, capsys, raw_date, compare_run):
+        init, _ = compare_run
+        code, _, err = _run(capsys, "compare", init, tmp_path / "none.yaml")
+        assert code == 2 and "none.yaml: file not found" in err
+        code, _, err = _run(capsys, "compare", raw_date / "calib_velo_to_cam.txt", init)
+        assert code == 2 and "pass the KITTI SOURCE it belongs to" in err
+        assert "Traceback" not in err

@@ -11,6 +11,8 @@ one axis moved 0.9-1.1 deg or 7-10 cm (4.6-15.6 px), so 0.5 deg / 5 cm are the d
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .config import Settings
@@ -93,3 +95,192 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         "frames": [f.name for f in frames],
         "features": feature_counts(stage.feats),
     }
+
+
+# ------------------------------------------------------------------------------- comparison
+
+
+@dataclass(frozen=True)
+class Preference:
+    """The paired per-frame test of two extrinsics with the points one of them sees.
+
+    Attributes
+    ----------
+    view : {"A", "B"}
+        The extrinsic whose view chose the LiDAR feature points.
+    mean_px : float
+        Mean over the frames of B's advantage in the edge objective (px; positive: B aligns
+        better).
+    se_px : float
+        Its standard error (px; NaN with one frame).
+    p_b : float
+        One-sided p that B is not better (NaN with one frame).
+    p_a : float
+        One-sided p that A is not better.
+    frames : int
+    frames_b_better : int
+        Frames in which B scores lower.
+    """
+
+    view: str
+    mean_px: float
+    se_px: float
+    p_b: float
+    p_a: float
+    frames: int
+    frames_b_better: int
+
+    def to_dict(self) -> dict:
+        return {"view": self.view, "mean_px": _num(self.mean_px, 4),
+                "se_px": _num(self.se_px, 4), "p_b": _num(self.p_b, 6),
+                "p_a": _num(self.p_a, 6), "frames": self.frames,
+                "frames_b_better": self.frames_b_better}
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Two extrinsics compared (:func:`compare_extrinsics`), in metres and degrees.
+
+    Attributes
+    ----------
+    T_a, T_b : ndarray, shape (4, 4)
+        The extrinsics (``T_cam_lidar``).
+    correction : ndarray, shape (6,)
+        ``D`` with ``T_b = T_a @ D``: x, y, z (m) and yaw, pitch, roll (deg, ZYX) in A's LiDAR
+        frame, the search's own axes (what ``result.json``'s ``correction`` is between a
+        calibration's start and its result).
+    rotation_deg : float
+        The angle between the two rotations.
+    translation_m : float
+        ``|t_b - t_a|``, the camera-frame translation difference.
+    camera_m : ndarray, shape (3,)
+        ``t_b - t_a`` in the camera frame (m).
+    pixels : float or None
+        Mean image distance between the feature points' projections under A and B, over the
+        frames (px); None without frames.
+    preferences : tuple of Preference
+        The paired test with A's points and with B's; empty without frames.
+    prefer : {"A", "B", "neither"} or None
+        Which one the frames prefer: one whose advantage is clear (p below
+        :data:`~paretocal.search.basin.CLEAR_P`, the verdict's level) with the points of
+        either view; "neither" otherwise; None without frames.
+    reason : str
+        The preference in words.
+    frames : tuple of str
+        The frames compared on.
+    """
+
+    T_a: np.ndarray
+    T_b: np.ndarray
+    correction: np.ndarray
+    rotation_deg: float
+    translation_m: float
+    camera_m: np.ndarray
+    pixels: float | None = None
+    preferences: tuple = ()
+    prefer: str | None = None
+    reason: str = ""
+    frames: tuple = ()
+
+    def to_dict(self) -> dict:
+        """The JSON form (``compare --out``): centimetres and degrees."""
+        c = self.correction
+        return {
+            "correction": {"x_cm": _num(100 * c[0], 3), "y_cm": _num(100 * c[1], 3),
+                           "z_cm": _num(100 * c[2], 3), "yaw_deg": _num(c[3], 4),
+                           "pitch_deg": _num(c[4], 4), "roll_deg": _num(c[5], 4)},
+            "rotation_deg": _num(self.rotation_deg, 4),
+            "translation_cm": _num(100 * self.translation_m, 3),
+            "camera_cm": [_num(100 * v, 3) for v in self.camera_m],
+            "pixels": None if self.pixels is None else _num(self.pixels, 3),
+            "prefer": self.prefer, "reason": self.reason,
+            "preferences": [p.to_dict() for p in self.preferences],
+            "frames": list(self.frames),
+            "T_a": np.asarray(self.T_a).tolist(), "T_b": np.asarray(self.T_b).tolist(),
+        }
+
+
+def _num(v: float, digits: int) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None
+
+
+def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | None = None,
+                       settings: Settings | None = None, progress=None) -> Comparison:
+    """Compare two extrinsics, and with ``frames`` say which one the frames prefer.
+
+    Parameters
+    ----------
+    T_a, T_b : ndarray, shape (4, 4)
+        ``T_cam_lidar`` A (e.g. the factory's, yesterday's) and B.
+    frames : list of Frame, optional
+        Frames of the rig; the edge objective is then evaluated per frame at both, with the
+        feature points each of them sees (points outside one's view would favour it), and a
+        paired t-test over the frames (:func:`~paretocal.search.basin.paired_preference`,
+        the verdict's test) says whether one is clearly better.
+    settings : Settings, optional
+        The features' and objective's settings (defaults otherwise).
+    progress : callable, optional
+        ``progress(stage, done, total)``.
+
+    Returns
+    -------
+    Comparison
+    """
+    from .geometry import correction_params, invert
+    from .inputs import prepare_lidar
+    from .search.basin import CLEAR_P, paired_preference
+    from .stage import Stage
+
+    T_a = np.asarray(T_a, dtype=np.float64)
+    T_b = np.asarray(T_b, dtype=np.float64)
+    e = pose_error(T_b, T_a)
+    base = dict(T_a=T_a, T_b=T_b, correction=correction_params(invert(T_a) @ T_b),
+                rotation_deg=float(e["rotation_deg"]),
+                translation_m=float(e["translation_cm"]) / 100.0,
+                camera_m=(T_b[:3, 3] - T_a[:3, 3]))
+    if not frames:
+        return Comparison(**base)
+    settings = (settings or Settings()).validate()
+    cam = frames[0].camera
+    lidar = prepare_lidar(frames, settings, [(cam, T_a), (cam, T_b)])
+    prefs, pixels = [], []
+    for name, T_view in (("A", T_a), ("B", T_b)):
+        stage = Stage(lidar.frames, T_view, T_view, settings,
+                      None if progress is None else
+                      (lambda d, t, v=name: progress(f"features ({v}'s view)", d, t)),
+                      rings=lidar.rings, sampling=False)
+        obj = stage.objective
+        x = np.zeros((2, 7))
+        x[:, :6] = correction_params(invert(T_view)[None] @ np.stack([T_a, T_b]))
+        x[:, 6] = stage.n_max
+        ab, ba = paired_preference(obj, x[0], x[1]), paired_preference(obj, x[1], x[0])
+        prefs.append(Preference(name, ab["mean_px"], ab["se_px"], ab["p"], ba["p"],
+                                ab["frames"], ab["frames_far_better"]))
+        pixels.append(displacement_px(obj, x[0], x[1]))
+    p_b = max(p.p_b for p in prefs)
+    p_a = max(p.p_a for p in prefs)
+    k = prefs[0].frames
+    if k < 2:
+        prefer, reason = "neither", ("one frame: a paired test needs at least two; compare "
+                                     "on more frames")
+    elif p_b < CLEAR_P:
+        prefer, reason = "B", _prefer_text("B", prefs, p_b)
+    elif p_a < CLEAR_P:
+        prefer, reason = "A", _prefer_text("A", prefs, p_a)
+    else:
+        prefer = "neither"
+        reason = (f"the frames do not tell them apart (B's mean advantage "
+                  f"{prefs[0].mean_px:+.3f} px with A's points, {prefs[1].mean_px:+.3f} px "
+                  f"with B's; p {min(p_a, p_b):.3g}, clear below {CLEAR_P:g})")
+    return Comparison(**base, pixels=float(np.mean(pixels)), preferences=tuple(prefs),
+                      prefer=prefer, reason=reason, frames=tuple(f.name for f in frames))
+
+
+def _prefer_text(who: str, prefs: list, p: float) -> str:
+    sign = 1.0 if who == "B" else -1.0
+    better = [p_.frames_b_better if who == "B" else p_.frames - p_.frames_b_better
+              for p_ in prefs]
+    return (f"the frames prefer {who}: it aligns better by {sign * prefs[0].mean_px:.3f} px "
+            f"per frame with A's points and {sign * prefs[1].mean_px:.3f} px with B's "
+            f"({better[0]} and {better[1]} of {prefs[0].frames} frames; p at most {p:.2g} with "
+            "either view's points)")

@@ -19,6 +19,8 @@ reported as ambiguous when the data lean towards it.
 
 from __future__ import annotations
 
+import math
+
 from typing import Any
 
 import numpy as np
@@ -60,9 +62,13 @@ def paired_preference(objective: AlignmentObjective, near: np.ndarray, far: np.n
     k = len(d)
     mean = float(d.mean())
     se = float(d.std(ddof=1) / np.sqrt(k)) if k > 1 else float("nan")
-    t = mean / se if k > 1 and se > 0 else (float("inf") * np.sign(mean) if k > 1 else float("nan"))
-    p = float(stdtr(k - 1, -t)) if k > 1 and np.isfinite(t) else (
-        0.0 if k > 1 and t > 0 else float("nan"))
+    if k < 2:
+        t = float("nan")
+    elif se > 0:
+        t = mean / se
+    else:                       # every frame differs alike: a sure advantage, or none at all
+        t = math.copysign(float("inf"), mean) if mean != 0 else 0.0
+    p = float(stdtr(k - 1, -t)) if k > 1 else float("nan")
     return {"mean_px": mean, "se_px": se, "t": float(t), "p": p, "frames": k,
             "frames_far_better": int((d > 0).sum())}
 
