@@ -271,6 +271,8 @@ BAD_MANIFESTS = {
     "camera bool": ("m.yaml", b"- {id: a, source: x, camera: true}\n",
                     "entry 1: camera True is not an integer"),
     "camera csv": ("m.csv", b"id,source,camera\na,x,two\n", "entry 1: camera 'two' is not"),
+    "camera superscript": ("m.csv", "id,source,camera\na,x,\u00b2\n".encode(),
+                           "entry 1: camera '\u00b2' is not an integer"),
     "id number": ("m.yaml", b"- {id: 0005, source: x}\n",
                   "entry 1: id 5 must be text; quote it (id: \"0005\")"),
     "id list": ("m.yaml", b"- {id: [a], source: x}\n", "entry 1: id ['a'] must be text"),

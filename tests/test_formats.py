@@ -502,6 +502,14 @@ class TestCameraInfo:
         with pytest.raises(InputError, match=r"camera\.k must hold 9 numbers"):
             detect_source(root)
 
+    def test_the_message_form_names_a_ragged_d(self, tmp_path, raw_frames):
+        msg = {"distortion_model": "plumb_bob", "d": [[1.0, 2.0], [3.0]], "k": [1.0] * 9,
+               "width": 10, "height": 10}
+        msg["k"][1] = msg["k"][3] = msg["k"][6] = msg["k"][7] = 0.0
+        root = generic_folder(tmp_path / "rig", raw_frames[:1], write_points_bin, camera=msg)
+        with pytest.raises(InputError, match=r"camera\.d "):
+            detect_source(root)
+
     def test_equidistant_and_rational_polynomial(self, tmp_path, raw_frames):
         f = raw_frames[:1]
         root = generic_folder(tmp_path / "eq", f, write_points_bin,

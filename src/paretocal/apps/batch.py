@@ -201,7 +201,8 @@ def _field(where: str, key: str, value) -> str | int:
     if key == "camera":
         if isinstance(value, int) and not isinstance(value, bool):
             return value
-        if isinstance(value, str) and value.strip().isdigit():
+        # ASCII digits only: str.isdigit() also takes "²", which int() refuses.
+        if isinstance(value, str) and value.strip().isascii() and value.strip().isdigit():
             return int(value)
         raise InputError(f"{where}: camera {quote(value)} is not an integer")
     if key in ("vehicle", "order"):

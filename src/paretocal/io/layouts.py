@@ -378,7 +378,7 @@ def _camera_info_message(path: str | Path, info: dict, prefix: str = "") -> Came
             raise InputError(f"{path}: missing {prefix}{key} (keys found: "
                              f"{key_list(info)})")
     D = get("D")
-    if D is not None and not isinstance(D, str) and len(np.atleast_1d(D)) == 0:
+    if isinstance(D, (list, tuple)) and len(D) == 0:        # "D: []": no distortion
         D = None
     model = get("distortion_model")
     if model is not None and str(model).strip().lower() in ("", "none"):
