@@ -1,5 +1,7 @@
-"""The interactive report page (``interactive.html``): its embedded data, that it is
-self-contained, and (in a real headless chromium) that it renders and responds to clicks."""
+"""The interactive report page (``interactive.html``): its embedded data (the pure functions
+that build it, every frame's layers and scores), that it is self-contained and small, and (in a
+real headless chromium) that it renders and responds: the front, the extrinsic buttons, the
+frame picker, the layers, zoom and pan."""
 
 from __future__ import annotations
 
@@ -19,7 +21,9 @@ from paretocal import Settings, calibrate
 from paretocal.camera import Camera, project
 from paretocal.geometry import correction_matrix
 from paretocal.report.results import write_run
-from paretocal.report.interactive import write_interactive
+from paretocal.report.interactive import (DEPTH_PERCENTILES, MAX_IMAGE_WIDTH, dequantise_xyz,
+                                          frame_scores, lidar_layer, page_data,
+                                          quantise_xyz, write_interactive)
 
 CHROMIUM = os.environ.get("PARETOCAL_CHROMIUM", "/usr/bin/chromium")
 BROWSER_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -46,9 +50,15 @@ def _page_data(text: str) -> dict:
     return json.loads(m.group(1))
 
 
-def _points(data: dict) -> np.ndarray:
-    raw = base64.b64decode(data["points"]["b64"])
-    return np.frombuffer(raw, dtype="<f4").reshape(-1, 3)
+def _points(entry: dict, key: str = "points") -> np.ndarray:
+    """A frame entry's embedded returns (or feature points), as the page's script reads them."""
+    layer = entry[key]
+    q = np.frombuffer(base64.b64decode(layer["xyz"]), dtype="<i2").reshape(-1, 3)
+    return dequantise_xyz(q, layer["scale"])
+
+
+def _decode(uri: str, flags=cv2.IMREAD_COLOR) -> np.ndarray:
+    return cv2.imdecode(np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8), flags)
 
 
 def _in_view(xyz: np.ndarray, frame, T, z_min: float) -> int:
@@ -66,6 +76,8 @@ class _Tags(HTMLParser):
 
 class TestPage:
     def test_embedded_data(self, run):
+        from scipy.spatial import cKDTree
+
         result, frames, out = run
         data = _page_data((out / "interactive.html").read_text(encoding="utf-8"))
         front = result.front
@@ -80,30 +92,60 @@ class TestPage:
             assert f"solution {i} of {len(front.X)}" in s["caption"]
         np.testing.assert_array_equal(np.array(data["T_init"]), result.T_init)
         np.testing.assert_array_equal(np.array(data["T_ref"]), result.T_ref)
-        f = frames[0]
-        assert data["frame"] == f.name
-        assert (data["width"], data["height"]) == f.size
-        np.testing.assert_array_equal(np.array(data["K"]), f.camera.K)
         assert data["z_min"] == result.settings.features.z_min
+        scene = result.objective.scene
 
-        # The points: float32 xyz of the frame, each in view for at least one extrinsic.
-        xyz = _points(data)
-        assert len(xyz) == data["points"]["count"]
-        assert 5000 < len(xyz) <= 20000
-        own = {r.tobytes() for r in np.ascontiguousarray(f.points[:, :3], dtype="<f4")}
-        assert all(r.tobytes() in own for r in xyz[:: max(1, len(xyz) // 500)])
+        # Every frame of the run, in its order, with its camera, image, edges, returns and
+        # feature points.
+        assert [e["name"] for e in data["frames"]] == [f.name for f in frames] == result.frames
         Ts = list(front.T) + [result.T_init, result.T_ref]
-        seen = np.zeros(len(xyz), dtype=bool)
-        for T in Ts:
-            seen |= project(xyz, f.camera, T, data["z_min"])[2]
-        assert seen.all()
+        for k, (e, f) in enumerate(zip(data["frames"], frames)):
+            cam = data["cameras"][e["camera"]]
+            assert (cam["width"], cam["height"]) == f.size
+            np.testing.assert_array_equal(np.array(cam["K"]), f.camera.K)
+            assert e["scene_index"] == k
 
-        # The image: a JPEG of the frame's size.
-        assert data["image"].startswith("data:image/jpeg;base64,")
-        img = cv2.imdecode(np.frombuffer(base64.b64decode(data["image"].split(",", 1)[1]),
-                                         np.uint8), cv2.IMREAD_COLOR)
-        assert img.shape == f.image.shape
-        assert np.abs(img.astype(int) - f.image.astype(int)).mean() < 6
+            # The returns: int16 on the frame's scale, each a return of the frame (to half a
+            # step), in view for at least one extrinsic of the page.
+            xyz = _points(e)
+            assert len(xyz) == e["points"]["count"] and 2000 <= len(xyz) <= 5000
+            assert e["points"]["scale"] < 0.005
+            d, _ = cKDTree(np.asarray(f.points[:, :3], np.float64)).query(xyz, p=np.inf)
+            assert d.max() <= e["points"]["scale"] / 2 + 1e-9
+            seen = np.zeros(len(xyz), dtype=bool)
+            for T in Ts:
+                seen |= project(xyz, f.camera, T, data["z_min"])[2]
+            assert seen.mean() > 0.995                      # quantised: a border point may leave
+            inten = np.frombuffer(base64.b64decode(e["points"]["intensity"]), np.uint8)
+            assert len(inten) == len(xyz) and inten.min() == 0 and inten.max() == 255
+
+            # The image: a JPEG at most MAX_IMAGE_WIDTH wide, the frame's image downscaled.
+            img = _decode(e["image"]["src"])
+            assert e["image"]["src"].startswith("data:image/jpeg;base64,")
+            assert img.shape[1] == e["image"]["width"] <= min(MAX_IMAGE_WIDTH, f.size[0])
+            assert abs(img.shape[0] / img.shape[1] - f.size[1] / f.size[0]) < 0.01
+            small = cv2.resize(f.image, img.shape[1::-1], interpolation=cv2.INTER_AREA)
+            assert np.abs(img.astype(int) - small.astype(int)).mean() < 6
+
+            # The edges: a 1-bit PNG of exactly the pixels the objective's distance transform
+            # is zero on.
+            edges = _decode(e["edges"]["src"], cv2.IMREAD_GRAYSCALE) > 0
+            np.testing.assert_array_equal(edges, scene.frame_dt(k) == 0)
+            assert e["edges"]["count"] == int(edges.sum()) > 1000
+
+            # The feature points: the first of the scene's order, with their groups.
+            a = int(scene.point_start[k])
+            fx = _points(e, "features")
+            m = len(fx)
+            assert m == e["features"]["count"] == min(1000, scene.points_per_frame[k])
+            np.testing.assert_allclose(fx, scene.frame_xyz(k)[:m], atol=e["features"]["scale"])
+            g = np.frombuffer(base64.b64decode(e["features"]["group"]), np.uint8)
+            np.testing.assert_array_equal(g, scene.group[a:a + m])
+
+        # The scores: each frame's objective at every solution, as the objective has it.
+        per = result.objective.chamfer(front.X, ucb_k=0.0)["per_frame"]
+        np.testing.assert_allclose(np.array(data["scores"]["solutions"]), per, rtol=1e-9,
+                                   atol=1e-9)
 
     def test_verdict_banner(self, run):
         result, _, out = run
@@ -132,7 +174,7 @@ class TestPage:
                 assert not v.startswith(("http:", "https:", "//")), (t, key, v)
         # No plotting library: the page's own script draws the front, and the page is small.
         assert "plotly" not in text.lower()
-        assert len(text.encode()) < 2_000_000
+        assert len(text.encode()) < 1_500_000                    # two frames
         # The SVG namespace is the one address in the script, an identifier, never fetched.
         rest = text.replace("http://www.w3.org/2000/svg", "")
         assert "http://" not in rest and "https://" not in rest
@@ -150,12 +192,73 @@ class TestPage:
         path = write_interactive(plain, frames, tmp_path / "a.html", max_points=500)
         text = path.read_text(encoding="utf-8")
         data = _page_data(text)
-        assert data["T_ref"] is None and data["points"]["count"] == 500
+        assert data["T_ref"] is None and data["frames"][0]["points"]["count"] == 500
+        assert data["scores"]["reference"] is None
         assert 'data-view="reference"' not in text and 'data-view="initial"' in text
         assert "ref_rotation_deg" not in data["solutions"][0]
         assert not list(tmp_path.glob(".*.tmp*")), "the atomic write left a temporary file"
         with pytest.raises(ValueError):
             write_interactive(result, [], tmp_path / "b.html")
+
+    def test_without_objective(self, run, tmp_path):
+        """A run that kept no objective (a resumed one): no scores, no feature points, and the
+        page says so; the edges, computed afresh with the run's settings, are the objective's."""
+        result, frames, _ = run
+        bare = dataclasses.replace(result, objective=None)
+        text = write_interactive(bare, frames, tmp_path / "c.html").read_text(encoding="utf-8")
+        data = _page_data(text)
+        assert data["scores"] is None
+        assert all(e["features"] is None and e["scene_index"] is None for e in data["frames"])
+        assert "did not keep its objective" in text
+        for k, e in enumerate(data["frames"]):
+            edges = _decode(e["edges"]["src"], cv2.IMREAD_GRAYSCALE) > 0
+            np.testing.assert_array_equal(edges, result.objective.scene.frame_dt(k) == 0)
+
+
+# --- the pure functions that build the page's data ---------------------------------------------
+
+def test_frame_scores_are_the_objectives_per_frame_terms(run):
+    result, frames, _ = run
+    obj = result.objective
+    X = result.front.X
+    want = obj.chamfer(X, ucb_k=0.0)["per_frame"]
+    got = frame_scores(obj, result.front.T, X[:, 6])
+    assert got.shape == (len(X), len(frames))
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+    # Any extrinsic, as the correction of the objective's own T_init that gives it.
+    n = result.n_points
+    ref = obj.chamfer(np.array([[0, 0, 0, 0, 0, 0, n]], float), ucb_k=0.0)["per_frame"][0]
+    np.testing.assert_allclose(frame_scores(obj, obj.T_init[None], [n])[0], ref, rtol=1e-12)
+    # The page's data holds the same numbers: every solution, initial and reference.
+    data = page_data(result, frames, budget_bytes=None, max_points=300)
+    s = data["scores"]
+    np.testing.assert_allclose(np.array(s["solutions"]), want, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(s["initial"], ref, rtol=1e-9)
+    np.testing.assert_allclose(s["reference"], frame_scores(obj, result.T_ref[None], [n])[0],
+                               rtol=1e-12)
+    assert s["n"] == n
+
+
+def test_depth_scale_is_the_frames_percentiles(run):
+    result, frames, _ = run
+    z_min = result.settings.features.z_min
+    for f in frames:
+        layer = lidar_layer(f.points[:, :3], f.points[:, 3], f.camera,
+                            [result.T_init, result.T_cam_lidar], result.T_cam_lidar, z_min, 1000)
+        _, z, vis = project(f.points, f.camera, result.T_cam_lidar, z_min)
+        assert layer["depth_range"] == pytest.approx(tuple(np.percentile(z[vis],
+                                                                         DEPTH_PERCENTILES)))
+        assert layer["in_view"] == int(vis.sum()) and layer["total"] == len(f.points)
+        lo, hi = layer["depth_range"]
+        assert 2 < lo < 10 < hi < 60, (lo, hi)              # a street: not the fixed 0-30 m
+        assert len(layer["xyz"]) == 1000 and layer["xyz"].dtype == np.dtype("<i2")
+        lo_i, hi_i = layer["intensity_range"]
+        assert 0 <= lo_i < hi_i <= 1.0                      # KITTI's reflectance
+    # The quantisation: half a step at most, the same arithmetic as the script.
+    xyz = np.random.default_rng(0).uniform(-80, 80, (1000, 3))
+    q, scale = quantise_xyz(xyz)
+    assert np.abs(dequantise_xyz(q, scale) - xyz).max() <= scale / 2 + 1e-12
+    assert scale == pytest.approx(np.abs(xyz).max() / 32767)
 
 
 # --- the page in a real browser --------------------------------------------------------------
@@ -212,41 +315,45 @@ def test_page_in_browser(request, tmp_path):
             browser.close()
 
 
-def _check_page(browser, result, frames, out: Path, tmp_path: Path) -> None:
-    """Open the page; check rendering, hover, a click on the front and the view buttons."""
-    data = _page_data((out / "interactive.html").read_text(encoding="utf-8"))
-    xyz, f, z_min = _points(data), frames[0], data["z_min"]
-    k, chosen = len(result.front.X), result.chosen
-    assert k >= 2, "the test needs a front of at least two solutions"
-
+def _open(browser, path: Path):
+    """A new page at ``path``, drawn; returns (page, errors, failed requests, request URLs)."""
     page = browser.new_page(viewport={"width": 1400, "height": 1100})
     errors, failed, urls = [], [], []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.on("requestfailed", lambda r: failed.append(r.url))
     page.on("request", lambda r: urls.append(r.url))
-    page.goto((out / "interactive.html").as_uri())
+    page.goto(path.as_uri())
     page.wait_for_selector("body[data-ready='1']", timeout=60_000)
+    return page, errors, failed, urls
 
-    # Rendered: the plot with one SVG point per solution, the overlay of the chosen solution,
-    # projected as paretocal.camera.project does.
+
+def _check_page(browser, result, frames, out: Path, tmp_path: Path) -> None:
+    """Open the page; check rendering, hover, a click on the front and the view buttons."""
+    data = _page_data((out / "interactive.html").read_text(encoding="utf-8"))
+    xyz, f, z_min = _points(data["frames"][0]), frames[0], data["z_min"]
+    k, chosen = len(result.front.X), result.chosen
+    assert k >= 2, "the test needs a front of at least two solutions"
+
+    page, errors, failed, urls = _open(browser, out / "interactive.html")
+
+    # Rendered: the plot with one SVG point per solution, the overlay of the chosen solution
+    # on the first frame, projected as paretocal.camera.project does.
     assert page.locator("#pareto svg").count() == 1
     points = page.locator("#pareto .sol")
     assert points.count() == k
     sol, caption = page.evaluate(STATE_JS)
     assert sol == str(chosen) and f"solution {chosen} of {k} (chosen)" in caption
+    assert page.evaluate("document.getElementById('overlay').dataset.frame") == f.name
     assert _in_view_of_caption(caption) == _in_view(xyz, f, result.T_cam_lidar, z_min) > 1000
     page.evaluate(SNAP_JS, "chosen")
-    shot = tmp_path / "interactive.png"
-    page.screenshot(path=str(shot), full_page=True)
-    png = cv2.imread(str(shot), cv2.IMREAD_COLOR)
-    box = page.locator("#overlay").bounding_box()
-    crop = png[int(box["y"]) + 2:int(box["y"] + box["height"]) - 2,
-               int(box["x"]) + 2:int(box["x"] + box["width"]) - 2]
+    shot = tmp_path / "overlay.png"
+    page.locator("#overlay").screenshot(path=str(shot))
+    crop = cv2.imread(str(shot), cv2.IMREAD_COLOR)[2:-2, 2:-2]
     assert crop.size and (np.abs(crop.astype(int) - 255).sum(axis=2) > 30).mean() > 0.8
-    plot_box = page.locator("#pareto").bounding_box()
-    plot = png[int(plot_box["y"]):int(plot_box["y"] + plot_box["height"]),
-               int(plot_box["x"]):int(plot_box["x"] + plot_box["width"])]
+    page.locator("#pareto").scroll_into_view_if_needed()
+    page.locator("#pareto").screenshot(path=str(tmp_path / "plot.png"))
+    plot = cv2.imread(str(tmp_path / "plot.png"), cv2.IMREAD_COLOR)
     assert (plot.astype(int).sum(axis=2) < 600).mean() > 0.005      # axes, labels, markers
 
     # The solution furthest (on screen) from the others, not the chosen one: hover, then click.
@@ -269,6 +376,10 @@ def _check_page(browser, result, frames, out: Path, tmp_path: Path) -> None:
     assert _in_view_of_caption(caption) == _in_view(xyz, f, result.front.T[target], z_min)
     page.evaluate(SNAP_JS, "clicked")
     assert page.evaluate(DIFF_JS, ["chosen", "clicked"]) > 500
+    # The frame list shows each frame's score at the solution shown.
+    want = data["scores"]["solutions"][target]
+    got = page.locator("#frames .score").all_text_contents()
+    assert got == [f"{v:.3f}" for v in want]
     page.screenshot(path=str(tmp_path / "interactive_clicked.png"), full_page=True)
 
     # The before/after buttons.
@@ -310,8 +421,8 @@ def test_page_projects_through_the_lens_model_in_browser(request, tmp_path):
                 f = dataclasses.replace(frames[0], camera=cam)
                 path = write_interactive(result, [f], tmp_path / f"{name}.html")
                 data = _page_data(path.read_text(encoding="utf-8"))
-                assert data["camera"]["model"] == cam.model
-                xyz, z_min = _points(data), data["z_min"]
+                assert data["cameras"][0]["model"] == cam.model
+                xyz, z_min = _points(data["frames"][0]), data["z_min"]
                 page = browser.new_page(viewport={"width": 1400, "height": 1100})
                 errors = []
                 page.on("pageerror", lambda e, errors=errors: errors.append(str(e)))
@@ -330,6 +441,165 @@ def test_page_projects_through_the_lens_model_in_browser(request, tmp_path):
                 page.close()
         finally:
             browser.close()
+
+
+@pytest.fixture(scope="module")
+def run20(raw_frames, tmp_path_factory):
+    """A quick real calibration of all 20 KITTI frames and its page: (result, frames, page)."""
+    assert len(raw_frames) == 20
+    T_init = raw_frames[0].T_ref @ correction_matrix(np.array([0.05, -0.03, 0.02, 1, -1, 0.5]))
+    settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
+    result = calibrate(raw_frames, T_init, settings)
+    path = write_interactive(result, result.sweeps,
+                             tmp_path_factory.mktemp("interactive20") / "interactive.html")
+    return result, result.sweeps, path
+
+
+def test_page_of_twenty_frames_is_small(run20):
+    """Every frame, each with its layers, in under 3 MB."""
+    result, frames, path = run20
+    size = path.stat().st_size
+    assert 1_000_000 < size < 3_000_000, size
+    data = _page_data(path.read_text(encoding="utf-8"))
+    assert [e["name"] for e in data["frames"]] == result.frames
+    assert all(e["features"] and e["edges"]["count"] > 1000 and e["points"]["count"] >= 2000
+               and e["image"]["quality"] >= 60 for e in data["frames"])
+    assert len(data["scores"]["solutions"][result.chosen]) == 20
+
+
+COUNT_JS = """rgb => {
+  const c = document.getElementById('overlay'), d = c.getContext('2d')
+    .getImageData(0, 0, c.width, c.height).data;
+  let n = 0;
+  for (let i = 0; i < d.length; i += 4)
+    if (rgb === null ? (d[i] || d[i + 1] || d[i + 2])
+                     : (d[i] === rgb[0] && d[i + 1] === rgb[1] && d[i + 2] === rgb[2])) n++;
+  return n;
+}"""
+
+
+def _wait_attr(page, name: str, value: str) -> None:
+    page.wait_for_function(
+        f"document.getElementById('overlay').dataset.{name} === {json.dumps(value)}",
+        timeout=20_000)
+
+
+def test_page_frames_layers_and_zoom_in_browser(request, tmp_path):
+    """The frame picker changes the frame drawn; each layer toggles; zoom and pan change the
+    view and the reset button restores it; no console error."""
+    sync_playwright = _require_browser()
+    result, frames, path = request.getfixturevalue("run20")
+    assert path.stat().st_size < 3_000_000
+    data = _page_data(path.read_text(encoding="utf-8"))
+    z_min, T = data["z_min"], result.T_cam_lidar
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS, headless=True)
+        try:
+            page, errors, failed, urls = _open(browser, path)
+            _check_frames_layers_zoom(page, result, frames, data, z_min, T)
+            assert not errors, f"console errors: {errors}"
+            assert not failed and all(u.startswith(("file:", "data:")) for u in urls), urls
+            page.close()
+        finally:
+            browser.close()
+
+
+def _check_frames_layers_zoom(page, result, frames, data, z_min, T) -> None:
+    # The picker: one entry per frame, each with its score at the chosen extrinsic.
+    items = page.locator("#frames button")
+    assert items.count() == len(frames) == 20
+    scores = data["scores"]["solutions"][result.chosen]
+    assert page.locator("#frames .score").all_text_contents() == [f"{v:.3f}" for v in scores]
+    assert page.locator("#frames button.active").get_attribute("data-frame") == "0"
+    _wait_attr(page, "frame", frames[0].name)
+    page.evaluate(SNAP_JS, "f0")
+
+    # Another frame: its name on the canvas, other pixels, its own points in view.
+    items.nth(7).click()
+    _wait_attr(page, "frame", frames[7].name)
+    assert page.locator("#frames button.active").get_attribute("data-frame") == "7"
+    page.evaluate(SNAP_JS, "f7")
+    assert page.evaluate(DIFF_JS, ["f0", "f7"]) > 50_000
+    _, caption = page.evaluate(STATE_JS)
+    xyz7 = _points(data["frames"][7])
+    assert f"frame {frames[7].name}, edge objective {scores[7]:.3f} px" in caption
+    assert _in_view_of_caption(caption) == _in_view(xyz7, frames[7], T, z_min) > 1000
+    page.keyboard.press("ArrowRight")
+    _wait_attr(page, "frame", frames[8].name)
+    items.nth(0).click()
+    _wait_attr(page, "frame", frames[0].name)
+    page.evaluate(SNAP_JS, "back")
+    assert page.evaluate(DIFF_JS, ["f0", "back"]) == 0
+
+    # The layers. No LiDAR colouring: the points go.
+    e0 = data["frames"][0]
+    page.check("#colour-none")
+    _wait_attr(page, "colour", "none")
+    page.evaluate(SNAP_JS, "none")
+    assert page.evaluate(DIFF_JS, ["f0", "none"]) > 5000
+    # No image either: black.
+    page.uncheck("#layer-image")
+    _wait_attr(page, "layers", "")
+    assert page.evaluate(COUNT_JS, None) == 0
+    # The edges alone: exactly the objective's edge pixels, in the edge colour.
+    page.check("#layer-edges")
+    _wait_attr(page, "layers", "edges")
+    assert page.evaluate(COUNT_JS, data["edge_color"]) == e0["edges"]["count"] > 1000
+    assert page.evaluate(COUNT_JS, None) == e0["edges"]["count"]
+    assert "image edges" in page.locator("#legend").text_content()
+    page.check("#layer-image")
+    _wait_attr(page, "layers", "image+edges")
+    page.evaluate(SNAP_JS, "edges")
+    assert page.evaluate(DIFF_JS, ["none", "edges"]) == e0["edges"]["count"]
+    page.uncheck("#layer-edges")
+    _wait_attr(page, "layers", "image")
+    # Intensity, then the feature groups: other colours; the groups of the first n points.
+    page.check("#colour-intensity")
+    _wait_attr(page, "colour", "intensity")
+    page.evaluate(SNAP_JS, "intensity")
+    assert page.evaluate(DIFF_JS, ["f0", "intensity"]) > 2000
+    assert "intensity" in page.locator("#legend").text_content()
+    page.check("#colour-groups")
+    _wait_attr(page, "colour", "groups")
+    page.evaluate(SNAP_JS, "groups")
+    assert page.evaluate(DIFF_JS, ["f0", "groups"]) > 2000
+    assert page.evaluate(DIFF_JS, ["intensity", "groups"]) > 2000
+    _, caption = page.evaluate(STATE_JS)
+    n, fx = result.n_points, _points(e0, "features")
+    m = re.search(r"feature points in view: (\d+) of the first (\d+)", caption)
+    assert m and int(m.group(2)) == min(n, len(fx)), caption
+    assert int(m.group(1)) == _in_view(fx[:n], frames[0], T, z_min) > 0
+    legend = page.locator("#legend").text_content()
+    assert all(g in legend for g in ("depth edge", "intensity edge", "smooth"))
+    page.check("#colour-depth")
+    _wait_attr(page, "colour", "depth")
+    page.evaluate(SNAP_JS, "depth")
+    assert page.evaluate(DIFF_JS, ["f0", "depth"]) == 0
+    lo, hi = e0["points"]["depth_range"]
+    legend = page.locator("#legend").text_content()
+    assert f"depth {lo:.1f} m" in legend and f"{hi:.1f} m" in legend and "percentile" in legend
+
+    # Zoom about the pointer, pan by dragging, reset.
+    box = page.locator("#overlay").bounding_box()
+    cx, cy = box["x"] + box["width"] * 0.6, box["y"] + box["height"] * 0.5
+    page.mouse.move(cx, cy)
+    page.mouse.wheel(0, -600)
+    page.wait_for_function("Number(document.getElementById('overlay').dataset.zoom) > 1.5")
+    page.wait_for_timeout(200)
+    page.evaluate(SNAP_JS, "zoomed")
+    assert page.evaluate(DIFF_JS, ["f0", "zoomed"]) > 50_000
+    zoom = float(page.evaluate("document.getElementById('overlay').dataset.zoom"))
+    page.mouse.down()
+    page.mouse.move(cx - 150, cy - 40, steps=5)
+    page.mouse.up()
+    page.wait_for_timeout(200)
+    page.evaluate(SNAP_JS, "panned")
+    assert page.evaluate(DIFF_JS, ["zoomed", "panned"]) > 50_000
+    assert float(page.evaluate("document.getElementById('overlay').dataset.zoom")) == zoom
+    page.click("#zoom-reset")
+    _wait_attr(page, "zoom", "1.000")
+    page.evaluate(SNAP_JS, "reset")
+    assert page.evaluate(DIFF_JS, ["f0", "reset"]) == 0
 
 
 def test_importing_the_figures_leaves_matplotlib_alone(tmp_path):

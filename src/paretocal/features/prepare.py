@@ -139,6 +139,18 @@ def view_mask(frame: Frame, views, features: FeatureSettings) -> np.ndarray:
     return mask
 
 
+def frame_image_features(frame: Frame, features: FeatureSettings,
+                         objective: ObjectiveSettings) -> ImageFeatures:
+    """The image features of ``frame`` as a calibration with these settings computes them:
+    Canny edges (:func:`~paretocal.features.image.edge_map`) and their truncated distance
+    transform, with the frame's mask."""
+    return image_features(
+        frame.image, features.blur_sigma, features.canny_low, features.canny_high,
+        objective.truncation_px, features.min_edge_px, mask=frame.mask,
+        relative=features.canny_relative, equalize=features.equalize,
+        noise_sigmas=features.canny_noise)
+
+
 def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
                   objective: ObjectiveSettings, rng: np.random.Generator,
                   rings: Rings | None = None, image: ImageFeatures | None = None,
@@ -153,11 +165,7 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
     the pose. ``sampling``: measure the LiDAR's sampling step in the image (the verdict's;
     a stage that only searches leaves it None).
     """
-    img = image if image is not None else image_features(
-        frame.image, features.blur_sigma, features.canny_low, features.canny_high,
-        objective.truncation_px, features.min_edge_px, mask=frame.mask,
-        relative=features.canny_relative, equalize=features.equalize,
-        noise_sigmas=features.canny_noise)
+    img = image if image is not None else frame_image_features(frame, features, objective)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep
     # near the view, a quarter of the points (a wider margin than the view's, so that no
     # neighbour of a kept point is lost). Edges are found in the sensor frame and mapped back.

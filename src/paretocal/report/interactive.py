@@ -1,16 +1,40 @@
 """An interactive, self-contained HTML page of a calibration run (``interactive.html``).
 
-The page needs no network access and no plotting library: the Pareto front is an SVG scatter
-drawn by the page's own script (``front_plot.js``, a few kilobytes), the camera image is a base64
-JPEG and the LiDAR points a base64 float32 array. The
-projection of the first frame's points is drawn client-side on a canvas, with the extrinsic of
-the solution clicked on the front, or the initial, chosen or reference extrinsic. The page
-projects through the camera's own model (pinhole with radial-tangential distortion, fisheye,
-Mei) with the arithmetic of :meth:`paretocal.camera.Camera.project_camera_points`, on the
-image as it was taken.
+The page is for judging a calibration by eye. It shows every frame the run calibrated (a list
+with each frame's score: the run's edge objective for that frame alone, at the extrinsic
+shown) and, for the frame picked, layers to toggle: the camera image, the image's edges (the
+Canny edge pixels the objective's distance transform is taken from), and the LiDAR returns
+coloured by depth (on that frame's own 5th-95th percentile of the depths in view), by
+intensity, or as the feature groups the objective compares (depth edges, intensity edges,
+smooth surface points; those the shown solution evaluates drawn larger). The extrinsic is the
+initial, the chosen, the reference (when known) or any solution clicked on the Pareto front.
+The canvas zooms (wheel) and pans (drag); a button resets the view.
 
-The page's skeleton, style sheet and script are package data in ``report/templates/``
-(``interactive.html``, ``interactive.css``, ``front_plot.js``, ``interactive.js``); the skeleton's ``$name``
+The page needs no network access and no plotting library: the front is an SVG scatter drawn by
+the page's own script (``front_plot.js``), and the projection is drawn client-side on a canvas
+through the camera's own model (pinhole with radial-tangential distortion, fisheye, Mei) with
+the arithmetic of :meth:`paretocal.camera.Camera.project_camera_points`, on the image as it
+was taken.
+
+Size. The page fits :data:`PAGE_BUDGET_BYTES` (2.9 MB) for 20 frames. Per frame it embeds the
+edges as a 1-bit PNG at the camera's resolution and the first :data:`MAX_FEATURE_POINTS`
+feature points (int16 xyz on a per-frame scale, a few mm at most, and a uint8 group) whole;
+what they leave goes to the images (JPEG, at most :data:`MAX_IMAGE_WIDTH` px wide) at
+:data:`GOOD_QUALITY` first, then to LiDAR returns (int16 xyz, uint8 intensity; between
+:data:`MIN_POINTS` and :data:`MAX_POINTS` a frame, a random sample of those in view), and
+the images then take the best quality and width that fit (:func:`page_data`). Measured: the
+20 KITTI raw frames of ``make demo`` (1242 x 375) give a page of 2.80 MB (images at full
+width, JPEG quality 70-75, 3516 returns a frame); 20 PandaSet front frames (1920 x 1080) 2.84
+MB (2000 returns a frame; their edges, 100 000 pixels a frame, take 1.1 MB, and the images
+are 840 x 472 at quality 55). More frames than :data:`REFERENCE_FRAMES` share the budget
+with fewer points each (down to a quarter); the edges stay whole, so many frames of detailed
+images outgrow it (a warning is logged).
+
+The page's data is built by pure functions (:func:`lidar_layer`, :func:`feature_layer`,
+:func:`edge_layer`, :func:`image_layer`, :func:`frame_scores`, assembled by
+:func:`page_data`), the HTML by :func:`write_interactive`. The page's skeleton, style sheet
+and script are package data in ``report/templates/`` (``interactive.html``,
+``interactive.css``, ``front_plot.js``, ``interactive.js``); the skeleton's ``$name``
 placeholders are filled with :class:`string.Template`.
 """
 
@@ -19,22 +43,56 @@ from __future__ import annotations
 import base64
 import html
 import json
+import logging
 from pathlib import Path
 from string import Template
 
 import cv2
 import numpy as np
 
-from ..camera import project
+from ..camera import Camera, project
+from ..features.lidar import GROUP_NAMES
+from ..geometry import correction_params, invert
 from ..io.atomic import atomic_write_text
 from ..io.frame import Frame
 from .html import template
 
-#: Largest number of LiDAR points embedded in the page.
-MAX_POINTS = 20000
-#: Depth (m) at the cold end of the colour scale, as in the static overlays.
-MAX_DEPTH = 30.0
-JPEG_QUALITY = 88
+log = logging.getLogger(__name__)
+
+#: Largest and smallest number of LiDAR returns embedded per frame (a random sample of those
+#: in view): as many as the budget leaves once the images have :data:`GOOD_QUALITY`.
+MAX_POINTS = 5000
+MIN_POINTS = 2000
+#: Largest number of the objective's feature points embedded per frame (the first of its
+#: evaluation order: a solution with ``n`` points per frame evaluates the first ``n``).
+MAX_FEATURE_POINTS = 1000
+#: A run of more frames than this embeds proportionally fewer points per frame (at least a
+#: quarter of the numbers above), so that its page stays near the budget.
+REFERENCE_FRAMES = 20
+#: Widest image embedded (px); wider images are downscaled for the page.
+MAX_IMAGE_WIDTH = 1280
+#: Narrowest image the page falls back to when the budget is tight (px).
+MIN_IMAGE_WIDTH = 480
+#: JPEG qualities tried, best first; below :data:`WIDTH_QUALITY_FLOOR` a narrower image (each
+#: :data:`WIDTH_STEP` of the last) is preferred to a lower quality.
+JPEG_QUALITIES = (90, 85, 80, 75, 70, 65, 60, 55, 50, 45, 40, 35, 30)
+WIDTH_QUALITY_FLOOR = 50
+#: The JPEG quality at :data:`MAX_IMAGE_WIDTH` the budget keeps for the images before it
+#: gives LiDAR returns beyond :data:`MIN_POINTS`.
+GOOD_QUALITY = 75
+WIDTH_STEP = 0.9
+#: The page's size the images are fitted into (bytes, the whole file).
+PAGE_BUDGET_BYTES = 2_900_000
+#: Percentiles of a frame's depths in view (at the chosen extrinsic) that span the depth
+#: colour scale, and of its intensities that span the intensity scale.
+DEPTH_PERCENTILES = (5.0, 95.0)
+INTENSITY_PERCENTILES = (1.0, 99.0)
+#: Depth scale (m) of a frame with no return in view.
+DEFAULT_DEPTH_RANGE = (0.0, 30.0)
+#: Colours (RGB) of the feature groups, in the order of ``GROUP_NAMES``, and of the image edges.
+GROUP_COLORS = ((255, 212, 0), (0, 229, 255), (140, 255, 40))
+EDGE_COLOR = (255, 0, 255)
+
 
 def _json_script(obj) -> str:
     """JSON text safe inside ``<script type="application/json">`` (no ``<``, ``>``, ``&``)."""
@@ -42,27 +100,429 @@ def _json_script(obj) -> str:
     return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
-def _depth_lut(n: int = 256) -> list[list[int]]:
-    """The static overlays' depth colours (matplotlib's ``turbo_r``: near is warm) as RGB."""
+def _lut(name: str, n: int = 256) -> list[list[int]]:
+    """A matplotlib colour map as ``n`` RGB triples (0-255)."""
     import matplotlib
 
-    cmap = matplotlib.colormaps["turbo_r"]
-    rgb = cmap(np.linspace(0.0, 1.0, n))[:, :3]
+    rgb = matplotlib.colormaps[name](np.linspace(0.0, 1.0, n))[:, :3]
     return np.round(rgb * 255).astype(int).tolist()
 
 
-def _embedded_points(frame: Frame, transforms: list[np.ndarray], z_min: float,
-                     max_points: int, seed: int = 0) -> np.ndarray:
-    """The frame's LiDAR points (float32 xyz) in view for at least one of ``transforms``,
-    randomly subsampled to at most ``max_points``."""
-    xyz = np.asarray(frame.points[:, :3], dtype=np.float64)
-    keep = np.zeros(len(xyz), dtype=bool)
-    for T in transforms:
-        keep |= project(xyz, frame.camera, T, z_min)[2]
-    idx = np.flatnonzero(keep)
-    if len(idx) > max_points:
-        idx = np.sort(np.random.default_rng(seed).choice(idx, max_points, replace=False))
-    return np.ascontiguousarray(xyz[idx], dtype="<f4")
+def _depth_lut(n: int = 256) -> list[list[int]]:
+    """The static overlays' depth colours (matplotlib's ``turbo_r``: near is warm) as RGB."""
+    return _lut("turbo_r", n)
+
+
+def _b64(a: np.ndarray | bytes) -> str:
+    raw = a if isinstance(a, bytes) else np.ascontiguousarray(a).tobytes()
+    return base64.b64encode(raw).decode("ascii")
+
+
+# --- the page's data: pure functions, arrays in, dicts out -----------------------------------
+
+def quantise_xyz(xyz: np.ndarray) -> tuple[np.ndarray, float]:
+    """Points as little-endian int16 on one scale.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        Metres.
+
+    Returns
+    -------
+    q : ndarray, shape (N, 3), ``<i2``
+    scale : float
+        Metres per unit: the largest coordinate magnitude maps to 32767, so the points are
+        ``q * scale`` to within ``scale / 2`` (1.5 mm for points within 100 m).
+    """
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    big = float(np.abs(xyz).max()) if xyz.size else 0.0
+    scale = max(big, 1e-3) / 32767.0
+    q = np.clip(np.rint(xyz / scale), -32767, 32767).astype("<i2")
+    return q, scale
+
+
+def dequantise_xyz(q: np.ndarray, scale: float) -> np.ndarray:
+    """The points (N, 3) float64 in metres the page draws: ``q * scale``, the same arithmetic
+    as the page's script."""
+    return np.asarray(q, dtype=np.float64).reshape(-1, 3) * float(scale)
+
+
+def lidar_layer(xyz: np.ndarray, intensity: np.ndarray | None, camera: Camera,
+                transforms: list[np.ndarray], T_chosen: np.ndarray, z_min: float,
+                max_points: int = MAX_POINTS, seed: int = 0) -> dict:
+    """The LiDAR returns of one frame as the page embeds them.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (N, 3)
+        The sweep in the LiDAR frame (m).
+    intensity : ndarray, shape (N,), or None
+        Reflectance in the file's units.
+    camera : Camera
+    transforms : list of ndarray (4, 4)
+        The extrinsics of the page (front, initial, reference): a return is kept when it is in
+        view for at least one.
+    T_chosen : ndarray, shape (4, 4)
+        The extrinsic the depth scale is taken at.
+    z_min : float
+        As :func:`paretocal.camera.project`.
+    max_points : int
+        The kept returns are randomly subsampled (fixed ``seed``) to at most this many.
+
+    Returns
+    -------
+    dict
+        ``xyz`` (P, 3) ``<i2`` and ``scale`` (m per unit, :func:`quantise_xyz`); ``intensity``
+        (P,) uint8, 0-255 over ``intensity_range`` (the kept returns' 1st-99th percentile, in
+        the file's units); ``depth_range`` (m): the 5th and 95th percentile of the depths (along
+        the optical axis) of all the frame's returns in view at ``T_chosen``; ``in_view``: how
+        many those are; ``total``: N.
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)[:, :3]
+    _, z, vis = project(xyz, camera, np.asarray(T_chosen), z_min)
+    if vis.any():
+        lo, hi = (float(v) for v in np.percentile(z[vis], DEPTH_PERCENTILES))
+    else:
+        lo, hi = DEFAULT_DEPTH_RANGE
+    if not hi > lo:
+        hi = lo + 1.0
+    # The first max_points of a random order that are in view for some extrinsic: a uniform
+    # sample of those, found by projecting a block of the order at a time (not the whole sweep
+    # under every extrinsic).
+    order = np.random.default_rng(seed).permutation(len(xyz))
+    block = max(8 * int(max_points), 16384)
+    kept, n_kept = [], 0
+    for a in range(0, len(order), block):
+        sel = order[a:a + block]
+        keep = np.zeros(len(sel), dtype=bool)
+        for T in transforms:
+            keep |= project(xyz[sel], camera, np.asarray(T), z_min)[2]
+        kept.append(sel[keep])
+        n_kept += int(keep.sum())
+        if n_kept >= max_points:
+            break
+    idx = np.sort(np.concatenate(kept)[:max_points]) if kept else np.zeros(0, np.int64)
+    q, scale = quantise_xyz(xyz[idx])
+    inten = (np.zeros(len(xyz)) if intensity is None
+             else np.nan_to_num(np.asarray(intensity, dtype=np.float64)))
+    if len(idx):
+        ilo, ihi = (float(v) for v in np.percentile(inten[idx], INTENSITY_PERCENTILES))
+    else:
+        ilo = ihi = 0.0
+    span = ihi - ilo
+    level = ((inten[idx] - ilo) / span if span > 0 else np.zeros(len(idx)))
+    return {"xyz": q, "scale": scale,
+            "intensity": np.rint(np.clip(level, 0.0, 1.0) * 255).astype(np.uint8),
+            "intensity_range": (ilo, ihi), "depth_range": (lo, hi),
+            "in_view": int(vis.sum()), "total": int(len(xyz))}
+
+
+def feature_layer(xyz: np.ndarray, group: np.ndarray,
+                  max_points: int = MAX_FEATURE_POINTS) -> dict:
+    """One frame's feature points (the objective's scene) as the page embeds them.
+
+    Parameters
+    ----------
+    xyz : ndarray, shape (M, 3)
+        The points in the LiDAR frame (m), in the objective's evaluation order.
+    group : ndarray, shape (M,)
+        Their groups (indices into ``GROUP_NAMES``).
+    max_points : int
+        The first this many of the order are kept (the ones any ``n`` evaluates first).
+
+    Returns
+    -------
+    dict
+        ``xyz`` (P, 3) ``<i2``, ``scale`` (:func:`quantise_xyz`), ``group`` (P,) uint8,
+        ``counts`` (G,) points of each group among the P, ``total``: M.
+    """
+    m = min(len(xyz), int(max_points))
+    q, scale = quantise_xyz(np.asarray(xyz, dtype=np.float64)[:m, :3])
+    g = np.asarray(group)[:m].astype(np.uint8)
+    return {"xyz": q, "scale": scale, "group": g,
+            "counts": np.bincount(g, minlength=len(GROUP_NAMES)).tolist(), "total": int(len(xyz))}
+
+
+def edge_layer(edges: np.ndarray) -> dict:
+    """An edge map as a 1-bit PNG.
+
+    Parameters
+    ----------
+    edges : ndarray, shape (H, W)
+        Non-zero on edge pixels.
+
+    Returns
+    -------
+    dict
+        ``png`` (bytes: a bilevel PNG, 255 on edge pixels, at the map's resolution),
+        ``count`` (edge pixels), ``width``, ``height``.
+    """
+    e = np.where(np.asarray(edges) > 0, 255, 0).astype(np.uint8)
+    ok, png = cv2.imencode(".png", e, [cv2.IMWRITE_PNG_BILEVEL, 1,
+                                       cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not ok:  # pragma: no cover - OpenCV always encodes a uint8 image
+        raise RuntimeError("could not encode the edge map as PNG")
+    return {"png": png.tobytes(), "count": int((e > 0).sum()), "width": int(e.shape[1]),
+            "height": int(e.shape[0])}
+
+
+def _jpeg(image: np.ndarray, quality: int) -> bytes:
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality),
+                                           cv2.IMWRITE_JPEG_OPTIMIZE, 1])
+    if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
+        raise RuntimeError("could not encode the camera image as JPEG")
+    return buf.tobytes()
+
+
+def _resized(image: np.ndarray, width: int) -> np.ndarray:
+    """``image`` downscaled (area interpolation) to ``width`` px, its aspect kept."""
+    h, w = image.shape[:2]
+    if width >= w:
+        return image
+    return cv2.resize(image, (int(width), max(1, int(round(h * width / w)))),
+                      interpolation=cv2.INTER_AREA)
+
+
+def image_layer(image: np.ndarray, max_bytes: float | None = None,
+                max_width: int = MAX_IMAGE_WIDTH, min_width: int = MIN_IMAGE_WIDTH) -> dict:
+    """A camera image as the page embeds it: the best JPEG that fits ``max_bytes``.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3), uint8
+        BGR.
+    max_bytes : float, optional
+        The JPEG's size limit (None: no limit, the best quality at ``max_width``).
+    max_width, min_width : int
+        The image is downscaled (area interpolation) to at most ``max_width`` px. The widest
+        image that fits at a quality of at least :data:`WIDTH_QUALITY_FLOOR` is taken, at the
+        best quality that fits (widths step by :data:`WIDTH_STEP` down to ``min_width``, where
+        the quality goes down to the last of :data:`JPEG_QUALITIES`); when none fits, the
+        smallest JPEG tried.
+
+    Returns
+    -------
+    dict
+        ``jpeg`` (bytes), ``width`` and ``height`` (px, of the JPEG) and ``quality``.
+    """
+    h, w = image.shape[:2]
+    widths = [min(w, int(max_width))]
+    while widths[-1] > min(int(min_width), w):
+        widths.append(max(int(round(widths[-1] * WIDTH_STEP)), min(int(min_width), w)))
+    smallest: tuple[bytes, int, int, int] | None = None
+    for k, width in enumerate(widths):
+        img = _resized(image, width)
+        height = img.shape[0]
+        last = k == len(widths) - 1
+        qs = [q for q in JPEG_QUALITIES if last or q >= WIDTH_QUALITY_FLOOR]
+        # The lowest quality first: when it does not fit, the next width. Then a binary search
+        # (the JPEG's size grows with the quality).
+        data = _jpeg(img, qs[-1])
+        if max_bytes is not None and len(data) > max_bytes:
+            if smallest is None or len(data) < len(smallest[0]):
+                smallest = (data, width, height, qs[-1])
+            continue
+        fit, lo, hi = (data, qs[-1]), 0, len(qs) - 2
+        while lo <= hi:
+            mid = (lo + hi) // 2
+            data = _jpeg(img, qs[mid])
+            if max_bytes is None or len(data) <= max_bytes:
+                fit, hi = (data, qs[mid]), mid - 1
+            else:
+                lo = mid + 1
+        return {"jpeg": fit[0], "width": width, "height": height, "quality": fit[1]}
+    assert smallest is not None
+    return {"jpeg": smallest[0], "width": smallest[1], "height": smallest[2],
+            "quality": smallest[3]}
+
+
+def frame_scores(objective, T: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """The alignment objective of each frame alone for some extrinsics.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        The run's objective (``result.objective``).
+    T : ndarray, shape (V, 4, 4)
+        Extrinsics ``T_cam_lidar``.
+    n : array_like, shape (V,)
+        Points per frame each is evaluated with.
+
+    Returns
+    -------
+    ndarray, shape (V, F)
+        ``objective.chamfer(X, ucb_k=0)["per_frame"]`` (px, lower is better) for the rows
+        ``X = (x, y, z, yaw, pitch, roll, n)``: each extrinsic as the correction of the
+        objective's own ``T_init`` that gives it.
+    """
+    T = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
+    D = invert(np.asarray(objective.T_init, dtype=np.float64)) @ T
+    X = np.column_stack([correction_params(D), np.asarray(n, dtype=np.float64).reshape(-1)])
+    return np.asarray(objective.chamfer(X, ucb_k=0.0)["per_frame"], dtype=np.float64)
+
+
+def _finite(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def _camera_entry(cam: Camera) -> dict:
+    return {**cam.to_dict(), "params": [float(v) if np.isfinite(v) else None
+                                        for v in cam.kernel_params()],
+            "mount": None if cam.mount is None else np.asarray(cam.mount, dtype=float).tolist()}
+
+
+def _frame_edges(result, frame: Frame, scene_index: int | None) -> np.ndarray:
+    """The edge pixels (H, W) bool the objective compares ``frame`` with: where its
+    distance transform is 0 in the run's scene, or computed afresh with the run's settings
+    when the run kept no objective."""
+    if scene_index is not None:
+        return result.objective.scene.frame_dt(scene_index) == 0
+    from ..features.prepare import frame_image_features
+
+    return frame_image_features(frame, result.settings.features,
+                                result.settings.objective).edges > 0
+
+
+def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX_POINTS,
+              max_feature_points: int = MAX_FEATURE_POINTS,
+              budget_bytes: int | None = PAGE_BUDGET_BYTES, overhead_bytes: int = 0,
+              min_points: int = MIN_POINTS) -> dict:
+    """Everything the page's script reads, JSON-ready.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    frames : list of Frame
+        The frames as calibrated (``result.sweeps``), in the run's order.
+    frame : int
+        The frame shown first (clipped to the list).
+    max_points, max_feature_points : int
+        Per frame: :func:`lidar_layer`, :func:`feature_layer`.
+    budget_bytes : int, optional
+        The page's size: the data (base64) plus ``overhead_bytes`` (the page around it). The
+        edges and feature points are embedded whole; what they leave goes to the images at
+        :data:`GOOD_QUALITY` first, then to LiDAR returns (between ``min_points`` and
+        ``max_points`` per frame), then the images take the best quality that fits
+        (:func:`image_layer`). None: ``max_points`` and the best quality.
+    min_points : int
+        See ``budget_bytes`` (at most ``max_points``).
+
+    Returns
+    -------
+    dict
+        ``frames``: per frame ``name``, ``camera`` (index into ``cameras``), ``image``
+        (a ``data:`` JPEG URI with its ``width``, ``height``, ``quality``), ``edges`` (a
+        ``data:`` PNG URI, ``count``), ``points`` (:func:`lidar_layer`, arrays base64),
+        ``features`` (:func:`feature_layer`, base64; None without an objective) and
+        ``scene_index``; ``cameras``; ``scores`` (None without an objective): per frame, the
+        objective of that frame alone (px, :func:`frame_scores`) at each front solution
+        (``solutions``, each at its own ``n``), at ``initial`` and ``reference`` (at the
+        chosen ``n``); the extrinsics, the front's solutions and plot, colour tables.
+    """
+    if not frames:
+        raise ValueError("the interactive page needs at least one frame")
+    z_min = float(result.settings.features.z_min)
+    front = result.front
+    T_front = [np.asarray(T, dtype=np.float64) for T in front.T]
+    views = T_front + [np.asarray(result.T_init, dtype=np.float64)]
+    if result.T_ref is not None:
+        views.append(np.asarray(result.T_ref, dtype=np.float64))
+    T_chosen = np.asarray(result.T_cam_lidar, dtype=np.float64)
+    objective = getattr(result, "objective", None)
+    names = list(objective.scene.names) if objective is not None else []
+
+    scores = None
+    if objective is not None:
+        n_chosen = result.n_points
+        Ts = np.stack(views)
+        n = np.concatenate([front.X[:, 6], [n_chosen] * (len(views) - len(T_front))])
+        per = frame_scores(objective, Ts, n)                        # (V, F_scene)
+        k = len(T_front)
+
+        def col(row):
+            return [_finite(row[names.index(f.name)]) if f.name in names else None
+                    for f in frames]
+
+        scores = {"solutions": [col(per[i]) for i in range(k)], "initial": col(per[k]),
+                  "reference": col(per[k + 1]) if result.T_ref is not None else None,
+                  "n": int(n_chosen)}
+
+    cameras: list[dict] = []
+    entries = []
+    for f in frames:
+        cam = _camera_entry(f.camera)
+        if cam not in cameras:
+            cameras.append(cam)
+        si = names.index(f.name) if f.name in names else None
+        edges = edge_layer(_frame_edges(result, f, si))
+        feats = None
+        if si is not None and objective is not None:
+            sc = objective.scene
+            a, b = int(sc.point_start[si]), int(sc.point_start[si + 1])
+            fl = feature_layer(sc.frame_xyz(si), sc.group[a:b], max_feature_points)
+            feats = {"count": int(len(fl["group"])), "scale": fl["scale"],
+                     "xyz": _b64(fl["xyz"]), "group": _b64(fl["group"]),
+                     "counts": fl["counts"], "total": fl["total"]}
+        entries.append({
+            "name": f.name, "camera": cameras.index(cam), "scene_index": si,
+            "image": None,
+            "edges": {"src": "data:image/png;base64," + _b64(edges["png"]),
+                      "count": edges["count"]},
+            "points": None, "features": feats})
+
+    solutions = _solution_entries(result)
+    ini = result.initial_error
+    captions = {"initial": "initial extrinsic" + (
+        f": error vs reference {_fmt_err(ini['rotation_deg'], ini['translation_cm'])}"
+        if ini is not None else ""),
+        "reference": "dataset reference extrinsic"}
+    data = {
+        "frames": entries, "start": min(max(int(frame), 0), len(frames) - 1),
+        "cameras": cameras, "z_min": z_min, "scores": scores,
+        "chosen": int(result.chosen),
+        "T_init": np.asarray(result.T_init, dtype=float).tolist(),
+        "T_ref": None if result.T_ref is None else np.asarray(result.T_ref, dtype=float).tolist(),
+        "solutions": solutions, "plot": _plot_spec(result, solutions),
+        "captions": captions, "lut": _depth_lut(), "lut_intensity": _lut("viridis"),
+        "groups": {"names": [g.replace("_", " ") for g in GROUP_NAMES],
+                   "colors": [list(c) for c in GROUP_COLORS]},
+        "edge_color": list(EDGE_COLOR), "depth_percentiles": list(DEPTH_PERCENTILES),
+        "intensity_percentiles": list(INTENSITY_PERCENTILES),
+    }
+    # What the edges, the feature points and the rest leave of the budget: the images at a
+    # good quality first, then LiDAR returns, then the images take what is left.
+    min_points = min(int(min_points), int(max_points))
+    n_points = int(max_points)
+    per_point = 7 * 4 / 3                                 # int16 xyz + uint8 intensity, base64
+    if budget_bytes is not None:
+        rest = len(_json_script(data)) + overhead_bytes + 400 * len(frames)
+        good = sum(len(_jpeg(_resized(f.image, MAX_IMAGE_WIDTH), GOOD_QUALITY))
+                   for f in frames) * 4 / 3
+        room = (budget_bytes - rest - good) / (len(frames) * per_point)
+        n_points = int(np.clip(room, min_points, max_points))
+    for f, e in zip(frames, entries):
+        pts = lidar_layer(f.points[:, :3], f.points[:, 3] if f.points.shape[1] > 3 else None,
+                          f.camera, views, T_chosen, z_min, n_points)
+        e["points"] = {"count": int(len(pts["xyz"])), "dtype": "int16", "layout": "xyz",
+                       "scale": pts["scale"], "xyz": _b64(pts["xyz"]),
+                       "intensity": _b64(pts["intensity"]),
+                       "intensity_range": list(pts["intensity_range"]),
+                       "depth_range": list(pts["depth_range"]), "in_view": pts["in_view"],
+                       "total": pts["total"]}
+    data["max_points"] = n_points
+    per_image = None
+    if budget_bytes is not None:
+        rest = len(_json_script(data)) + overhead_bytes
+        prefix = len('{"src":"data:image/jpeg;base64,","width":10000,"height":10000,'
+                     '"quality":100}') - len("null")
+        per_image = ((budget_bytes - rest) / len(frames) - prefix) * 3 / 4
+    for f, e in zip(frames, entries):
+        im = image_layer(f.image, None if per_image is None else max(per_image, 0.0))
+        e["image"] = {"src": "data:image/jpeg;base64," + _b64(im["jpeg"]),
+                      "width": im["width"], "height": im["height"], "quality": im["quality"]}
+    return data
 
 
 def _fmt_err(rot, trans) -> str:
@@ -123,7 +583,7 @@ def _run_table(result, frame: Frame) -> str:
     rows = [("frames", f"{len(result.frames)} ({html.escape(result.frames[0])}"
                        + (f" \u2026 {html.escape(result.frames[-1])})" if len(result.frames) > 1
                           else ")")),
-            ("overlay frame", html.escape(frame.name)),
+            ("first frame shown", html.escape(frame.name)),
             ("chosen", f"solution {result.chosen} of {len(result.front.X)}, "
                        f"rule {html.escape(str(result.decision.get('rule', '?')))}"),
             ("chosen n", f"{result.n_points} points/frame"),
@@ -165,28 +625,31 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
                       max_points: int = MAX_POINTS) -> Path:
     """Write the interactive report page of a calibration run.
 
-    The page is a single self-contained HTML file that makes no network request: its script
-    draws the front as SVG, the camera image is a base64 JPEG and the LiDAR points base64
-    float32.
-    It shows the Pareto front (hover for a solution's variables, cost, deviation and reference
-    errors; click to project with it), the projection of one frame's LiDAR points drawn on a
-    canvas by depth (near is warm) with buttons for the initial, chosen and reference
-    extrinsics, and a table of the run.
+    The page is a single self-contained HTML file that makes no network request (see the
+    module docstring for what it shows and what it embeds): a frame picker over every frame
+    with each frame's score, the projection of the picked frame's LiDAR returns drawn on a
+    canvas over its image and edges (by depth, intensity or feature group; zoom and pan), the
+    Pareto front (hover for a solution's variables, cost, deviation and reference errors;
+    click to project with it), buttons for the initial, chosen and reference extrinsics, the
+    verdict and a table of the run.
 
     Parameters
     ----------
     result : CalibrationResult
-        The run (its front, chosen solution, ``T_init`` and, when known, ``T_ref``).
+        The run (its front, chosen solution, ``T_init``, when known ``T_ref``, and its
+        ``objective`` for the per-frame scores and feature points: without one, a resumed
+        run's, the page says they are left out).
     frames : list of Frame
-        The run's frames; ``frames[frame]`` is the one projected.
+        The run's frames, as calibrated (``result.sweeps``).
     path : str or Path
         The output file (conventionally ``interactive.html`` in the run directory); written
         atomically.
     frame : int, optional
-        Which frame to project (clipped to the list); the first by default.
+        The frame shown first (clipped to the list); the first by default.
     max_points : int, optional
-        At most this many LiDAR points are embedded: those in view for at least one of the
-        front's, the initial or the reference extrinsic, randomly subsampled (fixed seed).
+        At most this many LiDAR returns per frame are embedded: those in view for at least
+        one of the front's, the initial or the reference extrinsic, randomly subsampled (fixed
+        seed).
 
     Returns
     -------
@@ -204,51 +667,51 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
         raise ValueError("write_interactive needs at least one frame")
     path = Path(path)
     f = frames[min(max(frame, 0), len(frames) - 1)]
-    z_min = float(result.settings.features.z_min)
-    cam = f.camera
-    transforms = [np.asarray(T) for T in result.front.T] + [result.T_init]
-    if result.T_ref is not None:
-        transforms.append(result.T_ref)
-    pts = _embedded_points(f, transforms, z_min, max_points)
-    ok, jpeg = cv2.imencode(".jpg", f.image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-    if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
-        raise RuntimeError("could not encode the camera image as JPEG")
-    solutions = _solution_entries(result)
-    ini = result.initial_error
-    captions = {"initial": "initial extrinsic" + (
-        f": error vs reference {_fmt_err(ini['rotation_deg'], ini['translation_cm'])}"
-        if ini is not None else ""),
-        "reference": "dataset reference extrinsic"}
-    data = {
-        "frame": f.name, "width": int(cam.width), "height": int(cam.height),
-        "K": np.asarray(cam.K, dtype=float).tolist(), "z_min": z_min, "max_depth": MAX_DEPTH,
-        "camera": {**cam.to_dict(), "params": [float(v) if np.isfinite(v) else None
-                                               for v in cam.kernel_params()]},
-        "image": "data:image/jpeg;base64," + base64.b64encode(jpeg.tobytes()).decode("ascii"),
-        "points": {"count": int(len(pts)), "dtype": "float32", "layout": "xyz",
-                   "b64": base64.b64encode(pts.tobytes()).decode("ascii")},
-        "chosen": int(result.chosen),
-        "T_init": np.asarray(result.T_init, dtype=float).tolist(),
-        "T_ref": None if result.T_ref is None else np.asarray(result.T_ref, dtype=float).tolist(),
-        "solutions": solutions, "plot": _plot_spec(result, solutions),
-        "captions": captions, "lut": _depth_lut(),
-    }
     buttons = ['<button type="button" data-view="initial" id="view-initial">initial</button>',
                '<button type="button" data-view="chosen" id="view-chosen">chosen</button>']
     if result.T_ref is not None:
         buttons.append('<button type="button" data-view="reference" id="view-reference">'
                        'reference</button>')
-    # interactive.html puts the run table before the plot (the grid shows it on the right), so
-    # the plot's container has its final width when the script sizes the figure.
+    has_objective = getattr(result, "objective", None) is not None
+    if has_objective:
+        scores_note = ("Score: the edge objective of the frame alone at the extrinsic shown "
+                       "(px, lower is better; initial and reference at the chosen n); the bar "
+                       "spans the best to the worst frame.")
+    else:
+        scores_note = ("No per-frame scores and no feature groups: this run did not keep its "
+                       "objective (a resumed run); the edges are computed afresh with the "
+                       "run's settings.")
     title = f"paretocal calibration run: {len(result.frames)} frame(s), n = {result.n_points}"
+    share = min(1.0, REFERENCE_FRAMES / len(frames))
+    n_points = max(MIN_POINTS // 4, int(round(MIN_POINTS * share)))
+    n_features = max(MAX_FEATURE_POINTS // 4, int(round(MAX_FEATURE_POINTS * share)))
+
+    def points_note(n: int) -> str:
+        return html.escape(
+            f"LiDAR: {n} returns embedded per frame at most (a random sample of those in view "
+            f"for some extrinsic of the page) and the first {n_features} feature points of the "
+            f"objective's order; images downscaled to at most {MAX_IMAGE_WIDTH} px wide for the "
+            "page (JPEG), edges at the camera's resolution.")
+
+    skeleton = Template(template("interactive.html"))
+    fields = dict(
+        title=html.escape(title), verdict=_verdict_banner(result),
+        run_table=_run_table(result, f), buttons="".join(buttons),
+        width=int(f.camera.width), height=int(f.camera.height),
+        scores_note=html.escape(scores_note), credit=html.escape(data_credit(f)),
+        css=template("interactive.css"),
+        js=template("front_plot.js") + template("interactive.js"))
     # substitute() fails on a missing placeholder; the values (the script, the data) are not
     # scanned, so a $ in them is inert.
-    page = Template(template("interactive.html")).substitute(
-        title=html.escape(title), verdict=_verdict_banner(result), frame_name=html.escape(f.name),
-        run_table=_run_table(result, f), buttons="".join(buttons),
-        width=int(cam.width), height=int(cam.height), max_depth=f"{MAX_DEPTH:g}",
-        n_points=len(pts), max_points=max_points, credit=html.escape(data_credit(f)),
-        data=_json_script(data), css=template("interactive.css"),
-        js=template("front_plot.js") + template("interactive.js"))
+    overhead = len(skeleton.substitute(fields, points_note=points_note(max_points),
+                                       data="").encode("utf-8"))
+    data = page_data(result, frames, frame, max_points, n_features, overhead_bytes=overhead,
+                     min_points=n_points)
+    fields["points_note"] = points_note(data["max_points"])
+    page = skeleton.substitute(fields, data=_json_script(data))
+    size = len(page.encode("utf-8"))
+    if size > PAGE_BUDGET_BYTES:
+        log.warning("interactive.html is %.2f MB for %d frames (budget %.2f MB)", size / 1e6,
+                    len(frames), PAGE_BUDGET_BYTES / 1e6)
     atomic_write_text(path, page)
     return path
