@@ -668,6 +668,7 @@ def test_a_correction_held_by_the_bounds_is_flagged(capfd, tmp_path, rig3, pertu
 
 def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
+    from paretocal.decide import Decision
     from paretocal.quality import AXES, UNITS, Quality
 
     # In result.json's form (cm and deg), read back as the run holds it.
@@ -679,7 +680,8 @@ def _fake_result(**over):
     X[0, :6] = over.pop("x", np.zeros(6))
     deg, m = over.pop("init_error", (10.0, 0.3))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
-                        front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
+                        front=SimpleNamespace(X=X), quality=q,
+                        decision=Decision(rule="knee", deviation_px=0.0), motion=None,
                         feature_counts=over.pop("feature_counts", {}),
                         evidence=over.pop("evidence", None), wide=over.pop("wide", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,

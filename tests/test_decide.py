@@ -1,8 +1,10 @@
+import json
+
 import numpy as np
 import pytest
 
 from paretocal.camera import Camera
-from paretocal.decide import choose, knee_index, reprojection_deviation
+from paretocal.decide import Decision, choose, decide, knee_index, reprojection_deviation
 from paretocal.errors import SettingsError
 from paretocal.geometry import correction_matrix
 
@@ -35,7 +37,7 @@ class TestChoose:
 
     def test_budget(self):
         i, d = choose(self.F, self.ms, "budget", 0.6)
-        assert i == 1 and d["solutions_within_budget"] == 2
+        assert i == 1 and d.solutions_within_budget == 2 and d.budget_ms == 0.6
 
     def test_budget_too_small(self):
         with pytest.raises(SettingsError, match="cheapest needs 0.1 ms"):
@@ -43,6 +45,41 @@ class TestChoose:
 
     def test_min_chamfer(self):
         assert choose(self.F, self.ms, "min-chamfer")[0] == 2
+
+
+class TestDecisionRecord:
+    F = np.array([[3.0, 0.0], [1.0, 0.5], [0.8, 2.0]])
+    ms = np.array([0.1, 0.5, 2.0])
+    dev = np.array([4.0, 0.5, 0.0])
+
+    def test_knee(self):
+        """The knee rule's decision, then what the run adds, in result.json's order."""
+        i, d = decide(self.F, self.ms, self.dev, "knee", max_deviation_px=1.0)
+        assert (d.rule, d.deviation_px, d.max_deviation_px) == ("knee", self.dev[i], 1.0)
+        assert d.n_points is None and d.measured_ms is None
+        assert list(d.to_dict()) == ["rule", "method", "deviation_px", "figure",
+                                     "max_deviation_px"]
+        basin = {"separation_px": 0.2, "same_basin": True, "kept": "far"}
+        run = d.with_run(n_points=46, front_size=3, polished=True, best_supported_n=120,
+                         basin=basin, measured_ms=0.0075)
+        doc = run.to_dict()
+        assert list(doc) == ["rule", "method", "deviation_px", "figure", "max_deviation_px",
+                             "n_points", "front_size", "polished", "best_supported_n", "basin",
+                             "measured_ms"]
+        assert doc["n_points"] == 46 and doc["basin"] == basin and doc["measured_ms"] == 0.0075
+        assert Decision.from_dict(doc).to_dict() == doc
+        assert json.dumps(doc) == json.dumps(Decision.from_dict(json.loads(json.dumps(doc)))
+                                             .to_dict())
+
+    def test_budget_and_min_chamfer(self):
+        i, d = decide(self.F, self.ms, self.dev, "budget", budget_ms=0.6)
+        doc = d.with_run(n_points=10, front_size=3, polished=False, best_supported_n=40,
+                         basin=None, measured_ms=0.5).to_dict()
+        assert list(doc)[:4] == ["rule", "budget_ms", "solutions_within_budget", "deviation_px"]
+        assert doc["basin"] is None and "max_deviation_px" not in doc
+        assert Decision.from_dict(doc).to_dict() == doc
+        i, d = decide(self.F, self.ms, self.dev, "min-chamfer")
+        assert i == 2 and d.to_dict() == {"rule": "min-chamfer", "deviation_px": 0.0}
 
 
 class TestDeviation:

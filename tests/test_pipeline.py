@@ -121,7 +121,7 @@ def test_recovers_reference_from_a_perturbed_start(raw_frames):
     assert X[:, 6].max() > 0.5 * r.n_range[1] and X[:, 6].min() < 0.1 * r.n_range[1]
     best = int(np.argmin(r.front.F[:, 0]))
     assert cols["ref_rotation_deg"][best] < 0.3 and cols["ref_translation_cm"][best] < 3.0
-    assert r.decision["deviation_px"] <= r.settings.decision.max_deviation_px
+    assert r.decision.deviation_px <= r.settings.decision.max_deviation_px
 
 
 def test_frames_without_points_in_view_do_not_count(raw_frames):

@@ -420,10 +420,10 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
         raise typer.Exit(130) from None
     ref = result.reference_error
     typer.echo(f"paretocal: {len(result.frames)} frames, {result.evaluations} evaluations in "
-               f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision['rule']}), "
+               f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision.rule}), "
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval modelled "
-               f"({result.decision['measured_ms']:.4g} measured now); "
+               f"({result.decision.measured_ms:.4g} measured now); "
                f"error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
     from .verdict import interval_text

@@ -9,6 +9,7 @@ import numpy as np
 
 from . import __version__
 from .config import Settings
+from .decide import Decision
 from .geometry import pose_error
 from .objective import CalibrationObjective
 from .objective.cost import CostModel
@@ -49,7 +50,7 @@ class CalibrationResult:
     T_ref: np.ndarray | None
     chosen: int
     front: Front
-    decision: dict
+    decision: Decision
     cost_model: CostModel
     settings: Settings
     evaluations: int
@@ -125,7 +126,7 @@ class CalibrationResult:
             "correction_frame": "lidar",
             "n_points": self.n_points,
             "objectives": self.objectives(),
-            "decision": self.decision,
+            "decision": self.decision.to_dict(),
             "reference_error": self.reference_error,
             "initial_error": self.initial_error,
             "evaluations": int(self.evaluations),

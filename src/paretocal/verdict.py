@@ -576,7 +576,7 @@ def reliability(result: "CalibrationResult") -> dict:
             reasons.append(f"the objective still falls beyond the search bound on "
                            f"{', '.join(beyond)}: the optimum lies outside the box; widen "
                            "--bound-t / --bound-r")
-    basin = (result.decision or {}).get("basin") or {}
+    basin = (None if result.decision is None else result.decision.basin) or {}
     if basin.get("ambiguous"):
         alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
         p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]

@@ -113,7 +113,7 @@ def _plot_spec(result, solutions: list[dict]) -> dict:
             "y_title": "f2: normalised cost (t_norm + m_norm)",
             "color": [s["ref_rotation_deg"] for s in solutions] if has_ref else None,
             "color_title": "rot. error (deg)",
-            "chosen_label": f"chosen ({result.decision.get('rule', '?')}, n = {result.n_points})"}
+            "chosen_label": f"chosen ({result.decision.rule or '?'}, n = {result.n_points})"}
 
 
 def _run_table(result, frame: Frame) -> str:
@@ -125,7 +125,7 @@ def _run_table(result, frame: Frame) -> str:
                           else ")")),
             ("overlay frame", html.escape(frame.name)),
             ("chosen", f"solution {result.chosen} of {len(result.front.X)}, "
-                       f"rule {html.escape(str(result.decision.get('rule', '?')))}"),
+                       f"rule {html.escape(result.decision.rule or '?')}"),
             ("chosen n", f"{result.n_points} points/frame"),
             ("f1 / f2", f"{obj['chamfer']:.4f} px / {obj['cost']:.4f}"),
             ("cost", f"{obj.get('ms', float('nan')):.4g} ms, {int(obj.get('bytes', 0)):,} bytes")]
