@@ -670,6 +670,7 @@ def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
     from paretocal.decide import Decision
     from paretocal.quality import AXES, UNITS, Quality
+    from paretocal.verdict import Evidence
 
     # In result.json's form (cm and deg), read back as the run holds it.
     q = {"units": dict(zip(AXES, UNITS)), "jackknife_se": dict.fromkeys(AXES, 0.1),
@@ -683,7 +684,8 @@ def _fake_result(**over):
                         front=SimpleNamespace(X=X), quality=q,
                         decision=Decision(rule="knee", deviation_px=0.0), motion=None,
                         feature_counts=over.pop("feature_counts", {}),
-                        evidence=over.pop("evidence", None), wide=over.pop("wide", None),
+                        evidence=Evidence.from_dict(over.pop("evidence", {})),
+                        wide=over.pop("wide", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
                                                             "init_error_deg": deg,
                                                             "init_error_m": m}))
@@ -792,13 +794,16 @@ def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
     """An unreliable result's intervals are not what they claim (a wrong basin, frames that
     disagree): result.json keeps them under ``intervals_not_trusted`` and the console says
     none."""
-    from paretocal.verdict import interval_text, reliability
+    from paretocal.verdict import Intervals, interval_text, reliability
 
     iv = {"frame": "lidar", "units": {"x": "cm"}, "half_width": {"x": 1.5}, "undetermined": []}
     rel = reliability(_fake_result(evidence={"intervals": iv}, **over))
+    written = Intervals.from_dict(iv).to_dict()
+    assert written["half_width"] == {"x": 1.5, "y": None, "z": None, "yaw": None, "pitch": None,
+                                     "roll": None}
     assert rel["verdict"] == ("ok" if ok else "unreliable")
-    assert rel["intervals"] == (iv if ok else None)
-    assert rel["intervals_not_trusted"] == (None if ok else iv)
+    assert rel["intervals"] == (written if ok else None)
+    assert rel["intervals_not_trusted"] == (None if ok else written)
     assert interval_text(rel) == ("x +-1.5 cm" if ok else None)
 
 

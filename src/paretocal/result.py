@@ -15,7 +15,7 @@ from .objective import CalibrationObjective
 from .objective.cost import CostModel
 from .quality import Quality
 from .search import VARIABLES
-from .verdict import reliability
+from .verdict import Evidence, reliability
 
 
 @dataclass
@@ -71,7 +71,7 @@ class CalibrationResult:
     inputs: dict | None = None
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
     #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
-    evidence: dict | None = None
+    evidence: Evidence | None = None
     #: What the wide start did (:meth:`paretocal.wide.WideStart.to_dict`), None when the
     #: stated error did not ask for it. When it applied, ``T_init`` is the start it found and
     #: the settings hold the narrower stated error the calibration used from there.
