@@ -175,7 +175,7 @@ def run_trial(case: Case, k: int, work: Path) -> dict:
         row.update(error=str(exc), wall_s=time.perf_counter() - t0)
         return row
     e = pose_error(r.T_cam_lidar, T_ref)
-    rel = r.reliability
+    rel = r.reliability.to_dict()                  # as result.json writes it (cm and deg)
     d = correction_between(r.T_cam_lidar, T_ref) * TO_REPORT
     iv = rel.get("intervals") or {}
     half = iv.get("half_width") or {}

@@ -782,11 +782,11 @@ def test_reliability_reasons(over, reason):
 
     rel = reliability(_fake_result(**over))
     if reason is None:
-        assert rel["verdict"] == "ok" and rel["reasons"] == []
+        assert rel.verdict == "ok" and rel.reasons == ()
     else:
-        assert rel["verdict"] == "unreliable" and len(rel["reasons"]) == 1, rel
-        assert reason in rel["reasons"][0], rel["reasons"]
-    json.dumps(rel, allow_nan=False)                     # plain JSON
+        assert rel.verdict == "unreliable" and len(rel.reasons) == 1, rel
+        assert reason in rel.reasons[0], rel.reasons
+    json.dumps(rel.to_dict(), allow_nan=False)           # plain JSON
 
 
 @pytest.mark.parametrize("over, ok", [({}, True), ({"frames": ["a", "b"]}, False)])
@@ -801,9 +801,11 @@ def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
     written = Intervals.from_dict(iv).to_dict()
     assert written["half_width"] == {"x": 1.5, "y": None, "z": None, "yaw": None, "pitch": None,
                                      "roll": None}
-    assert rel["verdict"] == ("ok" if ok else "unreliable")
-    assert rel["intervals"] == (written if ok else None)
-    assert rel["intervals_not_trusted"] == (None if ok else written)
+    assert rel.verdict == ("ok" if ok else "unreliable")
+    assert (rel.intervals is not None) == ok and (rel.intervals_not_trusted is None) == ok
+    doc = rel.to_dict()
+    assert doc["intervals"] == (written if ok else None)
+    assert doc["intervals_not_trusted"] == (None if ok else written)
     assert interval_text(rel) == ("x +-1.5 cm" if ok else None)
 
 

@@ -10,9 +10,10 @@ import pytest
 from paretocal.config import Settings
 from paretocal.stage import Stage
 from paretocal.quality import AXES, axis_resolution
-from paretocal.verdict import (Z95, CameraAgreement, Evidence, Intervals, RestartCheck,
-                               StartComparison, alignment_px, contrast_evidence, interval_text,
-                               intervals, pose_per_px, restart_evidence)
+from paretocal.verdict import (Z95, CameraAgreement, Evidence, Intervals, Reliability,
+                               RestartCheck, StartComparison, alignment_px, contrast_evidence,
+                               interval_text, intervals, pose_per_px, restart_evidence,
+                               verdict_text)
 
 SETTINGS = Settings().replace(search={"pop": 60, "gens": 30},
                               decision={"restarts": 1, "restart_share": 1.0})
@@ -153,10 +154,10 @@ def test_intervals_combine_jackknife_and_alignment():
     assert iv.per_px[0] == 0.04 and iv.jackknife_se[3] == 0.1                  # m, deg
     back = Intervals.from_dict(json.loads(json.dumps(doc)))
     assert back.to_dict() == doc and back.undetermined == iv.undetermined
-    text = interval_text({"intervals": doc})
+    text = interval_text(Reliability(verdict="ok", evidence=Evidence(intervals=iv)))
     assert text.startswith(f"x +-{h['x']:.2g} cm, y +-7.8 cm") and text.endswith(
         "not determined by the data: z, pitch")
-    assert interval_text({}) is None
+    assert interval_text(None) is None and interval_text(Reliability(verdict="ok")) is None
     # A shared bias bounded per axis (the LiDAR's sampling) replaces alignment x per pixel.
     bias = np.array([0.09, 0.0, 0.01, 0.0, 0.1, 0.6])                # m and deg
     iv = intervals(se, per_px, 1.5, Settings().search,
@@ -265,16 +266,17 @@ def test_the_start_is_compared_with_an_untrusted_result(stage, raw_frames):
 
 
 def test_the_verdict_line_of_an_untrusted_result_says_how_the_start_compares():
-    from paretocal.verdict import verdict_text
-
-    start = {"separation_deg": 2.5, "separation_cm": 14.0, "mean_px": 0.2, "frames": 8,
-             "frames_start_better": 6, "p_start_better": 0.02, "result_clearly_better": False}
-    line = verdict_text({"verdict": "unreliable", "reasons": ["the frames disagree"],
-                         "start": start})
+    start = StartComparison(separation_deg=2.5, separation_m=0.14, mean_px=0.2, frames=8,
+                            frames_start_better=6, p_start_better=0.02,
+                            result_clearly_better=False)
+    rel = Reliability(verdict="unreliable", reasons=("the frames disagree",),
+                      evidence=Evidence(start=start), frames=8)
+    assert rel.start is start
+    line = verdict_text(rel)
     assert line.startswith("UNRELIABLE: the frames disagree; ") and "6 of 8 frames" in line
-    assert "keep the initial extrinsic" in line
-    ok = verdict_text({"verdict": "ok", "reasons": [], "frames": 8, "start": None})
-    assert "initial extrinsic" not in ok
+    assert "keep the initial extrinsic" in line and "2.5 deg / 14 cm from it" in line
+    ok = verdict_text(Reliability(verdict="ok", evidence=Evidence(start=start), frames=8))
+    assert "initial extrinsic" not in ok and "(8 frames)" in ok
 
 
 def test_cameras_that_share_a_pose_agree_and_a_wrong_mount_disagrees(raw_frames):
@@ -379,3 +381,33 @@ def test_the_evidence_is_held_in_metres_and_written_as_it_was():
     assert isinstance(ev.contrast, Contrast) and np.isnan(ev.contrast.group_ratio[2])
     assert ev.intervals.half_width_report() == WRITTEN["intervals"]["half_width"]
     assert Evidence.from_dict({}).to_dict() == {}
+
+
+def test_the_verdict_is_written_as_result_json_has_it():
+    """A verdict read back from result.json's form: its intervals are those of the evidence,
+    trusted or not by the verdict; written again, the same text."""
+    evidence = {k: WRITTEN[k] for k in ("contrast", "start", "restart")}
+    ok = {"verdict": "ok", "reasons": [], "intervals": WRITTEN["intervals"],
+          "intervals_not_trusted": None, "evidence": evidence, "start": None, "frames": 20,
+          "in_view": 0.8489, "at_bound": [], "max_jackknife_se_deg": 0.0572,
+          "max_jackknife_se_cm": 0.348}
+    rel = Reliability.from_dict(json.loads(json.dumps(ok)))
+    assert rel.ok and rel.intervals is rel.evidence.intervals and rel.start is None
+    assert rel.max_jackknife_se_m == pytest.approx(0.00348) and rel.in_view == 0.8489
+    assert json.dumps(rel.to_dict()) == json.dumps(ok)
+    assert interval_text(rel).startswith("x +-3.1 cm, y +-4.1 cm, z +-4 cm, yaw +-0.24 deg")
+
+    bad = dict(ok, verdict="unreliable", reasons=["the frames disagree", "at a bound"],
+               intervals=None, intervals_not_trusted=WRITTEN["intervals"],
+               start=WRITTEN["start"], in_view=None, at_bound=["z"],
+               max_jackknife_se_deg=None, max_jackknife_se_cm=None)
+    rel = Reliability.from_dict(json.loads(json.dumps(bad)))
+    assert not rel.ok and rel.intervals is None and rel.intervals_not_trusted is not None
+    assert rel.start.separation_m == pytest.approx(0.03665) and np.isnan(rel.in_view)
+    assert json.dumps(rel.to_dict()) == json.dumps(bad)
+    assert interval_text(rel) is None
+    assert verdict_text(rel).startswith("UNRELIABLE: the frames disagree (and 1 more reason in "
+                                        "result.json); the frames do prefer the result")
+    nothing = Reliability(verdict="ok", frames=3).to_dict()
+    assert nothing["evidence"] is None and nothing["intervals"] is None
+    assert nothing["in_view"] is None and nothing["max_jackknife_se_cm"] is None

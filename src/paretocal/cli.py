@@ -70,6 +70,8 @@ def _choices(section: str, name: str, cls: str) -> type[Enum]:
 
 
 if TYPE_CHECKING:
+    from .verdict import Reliability
+
     # Classes made at run time from the configuration's lists, which the type checker cannot
     # read: to it they are enums of strings like any other.
     Rule = Enum
@@ -369,12 +371,12 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         if joint and name != names[0]:
             return
         ref = result.reference_error
-        rel = result.reliability
+        verdict = None if result.reliability is None else result.reliability.verdict
         what = f"cameras {', '.join(names)} at once" if joint else f"camera {name}"
         typer.echo(f"paretocal: {what}: {len(result.frames)} frames, chosen n = "
                    f"{result.n_points}; error vs reference: {_fmt_err(ref)}; verdict "
-                   f"{rel['verdict']}; wrote {out / (JOINT_RUN if joint else name)}")
-        if rel["verdict"] != "ok":
+                   f"{verdict}; wrote {out / (JOINT_RUN if joint else name)}")
+        if verdict != "ok":
             unreliable.append(name)
 
     try:
@@ -437,7 +439,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     if intervals:
         typer.echo(f"paretocal: 95 % intervals per axis (LiDAR frame): {intervals}")
     typer.echo(verdict_line(rel))
-    if strict and rel["verdict"] != "ok":
+    if strict and not rel.ok:
         raise typer.Exit(STRICT_EXIT)
 
 
@@ -463,7 +465,7 @@ def interrupted_line(exc, out: Path) -> str:
 STRICT_EXIT = 3
 
 
-def verdict_line(reliability: dict) -> str:
+def verdict_line(reliability: Reliability) -> str:
     """The CLI's last line: the verdict and its main reason, for a person."""
     from .verdict import verdict_text
 

@@ -176,8 +176,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
         wide=None if wide is None else wide.to_dict())
     result.reliability = reliability(result)
-    if result.reliability["verdict"] != "ok":
-        log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))
+    if not result.reliability.ok:
+        log.warning("the result may be unreliable: %s", "; ".join(result.reliability.reasons))
     return result
 
 

@@ -15,7 +15,7 @@ from .objective import CalibrationObjective
 from .objective.cost import CostModel
 from .quality import Quality
 from .search import VARIABLES
-from .verdict import Evidence, reliability
+from .verdict import Evidence, Reliability, reliability
 
 
 @dataclass
@@ -63,8 +63,9 @@ class CalibrationResult:
     nsga_front: tuple | None = None
     #: The quality report at the result (metres and degrees; ``result.json`` writes it in cm).
     quality: Quality | None = None
-    #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
-    reliability: dict | None = None
+    #: The verdict: ``"ok"`` or ``"unreliable"``, the reasons, the evidence (see
+    #: :func:`reliability`).
+    reliability: Reliability | None = None
     #: What was done about motion during the sweeps (see :func:`compensate_motion`).
     motion: dict | None = None
     #: What the input files offered: the point fields used, the camera model, notes.
@@ -145,6 +146,6 @@ class CalibrationResult:
             "motion": self.motion,
             "inputs": self.inputs,
             "wide_start": self.wide,
-            "reliability": self.reliability if self.reliability is not None
-            else reliability(self),
+            "reliability": (self.reliability if self.reliability is not None
+                            else reliability(self)).to_dict(),
         }

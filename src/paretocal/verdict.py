@@ -551,6 +551,105 @@ class Evidence:
                    cameras=part("cameras", CameraAgreement))
 
 
+@dataclass(frozen=True)
+class Reliability:
+    """The verdict on a result (:func:`reliability`): whether to trust it, why not, and what
+    it was judged from.
+
+    Attributes
+    ----------
+    verdict : str
+        ``"ok"`` or ``"unreliable"``.
+    reasons : tuple of str
+        What made it unreliable, for a person; empty when ok.
+    evidence : Evidence or None
+        The verdict's own checks (:func:`gather_evidence`), None without them; its intervals
+        are :attr:`intervals` for a result judged ok, :attr:`intervals_not_trusted` else.
+    frames : int
+        Frames of the run.
+    in_view : float
+        Share of the feature points in view at the chosen extrinsic (4 decimals); NaN when
+        not known (written null).
+    at_bound : tuple of str
+        The axes on which the correction sits at a search bound.
+    max_jackknife_se_deg : float
+        The largest rotation jackknife standard error the verdict read (deg, 4 decimals);
+        NaN without one (written null).
+    max_jackknife_se_m : float
+        The largest translation jackknife standard error the verdict read (m; written in cm,
+        3 decimals); NaN without one.
+    """
+
+    verdict: str
+    reasons: tuple[str, ...] = ()
+    evidence: Evidence | None = None
+    frames: int = 0
+    in_view: float = np.nan
+    at_bound: tuple[str, ...] = ()
+    max_jackknife_se_deg: float = np.nan
+    max_jackknife_se_m: float = np.nan
+
+    @property
+    def ok(self) -> bool:
+        """Whether the result is judged ok."""
+        return self.verdict == "ok"
+
+    @property
+    def intervals(self) -> Intervals | None:
+        """The per-axis 95 % intervals, only for a result judged ok: the errors that make a
+        result unreliable are ones the intervals do not measure."""
+        return None if self.reasons or self.evidence is None else self.evidence.intervals
+
+    @property
+    def intervals_not_trusted(self) -> Intervals | None:
+        """The intervals of a result judged unreliable (not what they claim)."""
+        return None if not self.reasons or self.evidence is None else self.evidence.intervals
+
+    @property
+    def start(self) -> StartComparison | None:
+        """How the initial extrinsic compares, for a result judged unreliable (keep the
+        start?); None for one judged ok."""
+        return None if not self.reasons or self.evidence is None else self.evidence.start
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (``reliability``): the intervals under ``intervals``
+        or ``intervals_not_trusted``, the rest of the evidence under ``evidence``."""
+        def written(part):
+            return None if part is None else part.to_dict()
+
+        ev = None if self.evidence is None else self.evidence.to_dict(intervals=False)
+        return {
+            "verdict": self.verdict,
+            "reasons": list(self.reasons),
+            "intervals": written(self.intervals),
+            "intervals_not_trusted": written(self.intervals_not_trusted),
+            "evidence": ev or None,
+            "start": written(self.start),
+            "frames": int(self.frames),
+            "in_view": _or_none(self.in_view),
+            "at_bound": list(self.at_bound),
+            "max_jackknife_se_deg": _or_none(self.max_jackknife_se_deg),
+            "max_jackknife_se_cm": _cm_or_none(self.max_jackknife_se_m, 3),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Reliability":
+        """Read back from :meth:`to_dict`'s form (``result.json``'s ``reliability``)."""
+        iv = doc.get("intervals") or doc.get("intervals_not_trusted")
+        parts = dict(doc.get("evidence") or {})
+        if iv is not None:
+            parts["intervals"] = iv
+        if doc.get("start") is not None:
+            parts.setdefault("start", doc["start"])
+        return cls(verdict=str(doc.get("verdict", "")),
+                   reasons=tuple(str(r) for r in doc.get("reasons") or []),
+                   evidence=Evidence.from_dict(parts) if parts else None,
+                   frames=int(doc.get("frames", 0)), in_view=_nan(doc.get("in_view")),
+                   at_bound=tuple(str(a) for a in doc.get("at_bound") or []),
+                   max_jackknife_se_deg=_nan(doc.get("max_jackknife_se_deg")),
+                   max_jackknife_se_m=_nan(doc.get("max_jackknife_se_cm")) / 100.0)
+
+
 def restart_evidence(objective, search: SearchSettings, decision: DecisionSettings, n_min: int,
                      n_max: int, x: np.ndarray, x_opt: np.ndarray | None = None) -> RestartCheck:
     """An independent restart and how it compares with the result.
@@ -960,7 +1059,7 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                  if cameras is not None and len(cameras) > 1 else None))
 
 
-def reliability(result: "CalibrationResult") -> dict:
+def reliability(result: "CalibrationResult") -> Reliability:
     """A short verdict on whether to trust ``result``, from what the run already computed.
 
     ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
@@ -1105,23 +1204,16 @@ def reliability(result: "CalibrationResult") -> dict:
         wide = _imprecise(iv)
         if wide:
             reasons.append(wide)
-    # Intervals hold only where nothing else casts doubt on the result: a wrong basin, frames
-    # that disagree or a result at a bound are all errors the intervals do not measure.
-    ivd = None if iv is None else iv.to_dict()
-    return {
-        "verdict": "unreliable" if reasons else "ok",
-        "reasons": reasons,
-        "intervals": None if reasons else ivd,
-        "intervals_not_trusted": ivd if reasons else None,
-        "evidence": ev.to_dict(intervals=False) or None,
-        # How the start compares, said when the result is not trusted (keep the start?).
-        "start": ev.start.to_dict() if reasons and ev.start is not None else None,
-        "frames": n_frames,
-        "in_view": None if in_view is None else round(float(in_view), 4),
-        "at_bound": at_bound,
-        "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
-        "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
-    }
+    # Intervals hold only where nothing else casts doubt on the result (Reliability.intervals):
+    # a wrong basin, frames that disagree or a result at a bound are all errors the intervals
+    # do not measure.
+    return Reliability(
+        verdict="unreliable" if reasons else "ok", reasons=tuple(reasons),
+        evidence=getattr(result, "evidence", None), frames=n_frames,
+        in_view=np.nan if in_view is None else round(float(in_view), 4),
+        at_bound=tuple(at_bound),
+        max_jackknife_se_deg=np.nan if se_deg is None else round(float(se_deg), 4),
+        max_jackknife_se_m=np.nan if se_cm is None else round(float(se_cm), 3) / 100.0)
 
 
 def _imprecise(iv: Intervals) -> str | None:
@@ -1147,30 +1239,30 @@ def _imprecise(iv: Intervals) -> str | None:
             "corners, cars at several distances), or keep the start if it was measured better")
 
 
-def verdict_text(rel: dict) -> str:
+def verdict_text(rel: Reliability) -> str:
     """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
     ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
-    reasons = rel.get("reasons") or []
-    if rel.get("verdict") == "ok" or not reasons:
-        return (f"OK: nothing the run measured casts doubt on the result ({rel.get('frames')} "
+    reasons = rel.reasons
+    if rel.ok or not reasons:
+        return (f"OK: nothing the run measured casts doubt on the result ({rel.frames} "
                 "frames)")
     more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
             "result.json)" if len(reasons) > 1 else "")
-    start = f"; {start_text(StartComparison.from_dict(rel['start']))}" if rel.get("start") else ""
+    start = "" if rel.start is None else f"; {start_text(rel.start)}"
     return f"UNRELIABLE: {reasons[0]}{more}{start}"
 
 
-
-
-def interval_text(rel: dict) -> str | None:
-    """The per-axis 95 % intervals of :func:`reliability` in one line, or None without them:
+def interval_text(rel: Reliability | None) -> str | None:
+    """The per-axis 95 % intervals of :func:`reliability` in one line, or None without them
+    (none, or a result judged unreliable):
     ``"x +-1.2 cm, ..., roll +-0.3 deg; not determined by the data: z"``."""
-    iv = (rel or {}).get("intervals")
-    if not iv:
+    iv = None if rel is None else rel.intervals
+    if iv is None:
         return None
-    parts = [f"{a} +-{h:.2g} {iv['units'][a]}" for a, h in iv["half_width"].items()
+    units = dict(zip(AXES, UNITS))
+    parts = [f"{a} +-{h:.2g} {units[a]}" for a, h in iv.half_width_report().items()
              if h is not None]
     text = ", ".join(parts) if parts else "no axis"
-    if iv.get("undetermined"):
-        text += "; not determined by the data: " + ", ".join(iv["undetermined"])
+    if iv.undetermined:
+        text += "; not determined by the data: " + ", ".join(iv.undetermined)
     return text

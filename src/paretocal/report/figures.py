@@ -99,10 +99,10 @@ def pareto_figure(result, path: Path) -> None:
         h2, l2 = ax3.get_legend_handles_labels()
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center")
     rel = getattr(result, "reliability", None)
-    if rel:
+    if rel is not None:
         from ..verdict import verdict_text
 
-        ok = rel.get("verdict") == "ok"
+        ok = rel.ok
         fig.suptitle(textwrap.fill(verdict_text(rel), 40 * panels), fontsize=10,
                      color="darkgreen" if ok else "darkred", fontweight="bold")
     fig.tight_layout()

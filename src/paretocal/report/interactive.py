@@ -146,13 +146,13 @@ def _run_table(result, frame: Frame) -> str:
 def _verdict_banner(result) -> str:
     """The run's verdict as a banner: every reason when it is unreliable."""
     rel = getattr(result, "reliability", None)
-    if not rel:
+    if rel is None:
         return ""
     from ..verdict import interval_text, verdict_text
 
-    ok = rel.get("verdict") == "ok"
+    ok = rel.ok
     items = "" if ok else "<ul>" + "".join(f"<li>{html.escape(r)}</li>"
-                                            for r in rel.get("reasons", [])) + "</ul>"
+                                            for r in rel.reasons) + "</ul>"
     head = verdict_text(rel) if ok else "UNRELIABLE: do not use this result as it is"
     iv = interval_text(rel)
     iv = "" if iv is None else (f'<div class="intervals">95 % intervals per axis (LiDAR frame): '
