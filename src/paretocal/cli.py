@@ -578,17 +578,16 @@ def check(
                                  "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
     with _Progress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
-    r["extrinsic_from"] = str(extrinsic) if extrinsic is not None else "dataset"
+    r = r.with_source(str(extrinsic) if extrinsic is not None else "dataset")
     if out is not None:
-        atomic_write_text(out, json.dumps(r, indent=2) + "\n")
-    m = r["moved"]
+        atomic_write_text(out, json.dumps(r.to_dict(), indent=2) + "\n")
     which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
-    typer.echo(f"paretocal: {which}: {r['verdict'].upper()} (score {r['score']:.2f}; the local "
-               f"optimum is {m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / "
-               f"{m['pixels']:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
-               f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
-    typer.echo(f"paretocal: {_features_line(r['features'])}")
-    for note in r["notes"]:
+    typer.echo(f"paretocal: {which}: {r.verdict.upper()} (score {r.score:.2f}; the local "
+               f"optimum is {r.moved_deg:.3f} deg / {100 * r.moved_m:.2f} cm / "
+               f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
+    typer.echo(f"paretocal: {_features_line(r.features)}")
+    for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
 
 

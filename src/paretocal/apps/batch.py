@@ -424,7 +424,7 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
               "reliability_reason": "; ".join(rel.reasons)}
     if check:
         c = check_extrinsic(frames, result.T_init, settings)
-        record.update({"check_verdict": c["verdict"], "check_score": c["score"]})
+        record.update({"check_verdict": c.verdict, "check_score": c.score})
     return record
 
 
