@@ -666,6 +666,16 @@ def test_a_correction_held_by_the_bounds_is_flagged(capfd, tmp_path, rig3, pertu
     assert "WARNING: the result may be unreliable" in err
 
 
+def _basin(**over):
+    """A near/far basin test of two basins (:class:`paretocal.search.basin.BasinTest`)."""
+    from paretocal.search.basin import BasinTest
+
+    doc = {"separation_px": 45.7, "separation_deg": 3.6163, "separation_cm": 11.749,
+           "departure_near": 0.4, "departure_far": 0.3, "same_basin": False, "mean_px": 0.02,
+           "se_px": 0.05, "t": 0.4, "alternative": [0.1, 0, 0, 3.6, 0, 0], "rebuilt": False}
+    return BasinTest.from_dict({**doc, **over})
+
+
 def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
     from paretocal.decide import Decision
@@ -682,7 +692,8 @@ def _fake_result(**over):
     deg, m = over.pop("init_error", (10.0, 0.3))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q,
-                        decision=Decision(rule="knee", deviation_px=0.0), motion=None,
+                        decision=Decision(rule="knee", deviation_px=0.0,
+                                          basin=over.pop("basin", None)), motion=None,
                         feature_counts=over.pop("feature_counts", {}),
                         evidence=Evidence.from_dict(over.pop("evidence", {})),
                         wide=over.pop("wide", None),
@@ -742,6 +753,11 @@ def _fake_result(**over):
                "apart that the frames do not tell apart"}},
      "the wide search found two poses 2.9 deg / 203 cm apart"),
     ({"wide": {"applied": True, "ambiguity": None, "disagree": True}}, None),
+    # The near/far basin test of the front: two poses the frames do not tell apart.
+    ({"basin": _basin(ambiguous=True, kept="near", p=0.2, frames=4)},
+     "ambiguous: a pose 3.6 deg / 12 cm away fits the frames about as well (paired test over "
+     "4 frames: p = 0.8); the result is the optimum next to the initial extrinsic"),
+    ({"basin": _basin(ambiguous=False, kept="far", p=0.001, frames=4)}, None),
     # Photo-consistency checks the calibration that followed a wide start.
     ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
         "agree": False, "result": 0.512, "rival": 0.47, "separation_deg": 3.1,

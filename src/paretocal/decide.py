@@ -25,11 +25,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .errors import SettingsError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .search.basin import BasinTest
 
 
 @dataclass(frozen=True)
@@ -64,7 +67,7 @@ class Decision:
         Whether the front was polished.
     best_supported_n : int or None
         Points per frame of the best-supported solution (the lowest f1).
-    basin : dict or None
+    basin : BasinTest or None
         The near/far basin test (:func:`paretocal.search.basin.prefer_near`), None when the
         front was not polished.
     measured_ms : float or None
@@ -83,11 +86,11 @@ class Decision:
     front_size: int | None = None
     polished: bool | None = None
     best_supported_n: int | None = None
-    basin: dict | None = None
+    basin: "BasinTest | None" = None
     measured_ms: float | None = None
 
     def with_run(self, n_points: int, front_size: int, polished: bool, best_supported_n: int,
-               basin: dict | None, measured_ms: float) -> "Decision":
+               basin: "BasinTest | None", measured_ms: float) -> "Decision":
         """The decision with what the run knows of the chosen solution and its front."""
         return dataclasses.replace(self, n_points=int(n_points), front_size=int(front_size),
                                    polished=bool(polished),
@@ -111,7 +114,7 @@ class Decision:
         if self.n_points is not None:
             out.update(n_points=self.n_points, front_size=self.front_size,
                        polished=self.polished, best_supported_n=self.best_supported_n,
-                       basin=self.basin)
+                       basin=None if self.basin is None else self.basin.to_dict())
         if self.measured_ms is not None:
             out["measured_ms"] = float(self.measured_ms)
         return out
@@ -120,6 +123,8 @@ class Decision:
     def from_dict(cls, doc: dict[str, Any]) -> "Decision":
         """The decision read back from its :meth:`to_dict` form (``result.json``'s
         ``decision``); a figure it lacks reads as None (NaN for ``deviation_px``)."""
+        from .search.basin import BasinTest
+
         def opt(key, kind):
             v = doc.get(key)
             return None if v is None else kind(v)
@@ -132,7 +137,8 @@ class Decision:
                    solutions_within_budget=opt("solutions_within_budget", int),
                    n_points=opt("n_points", int), front_size=opt("front_size", int),
                    polished=opt("polished", bool),
-                   best_supported_n=opt("best_supported_n", int), basin=doc.get("basin"),
+                   best_supported_n=opt("best_supported_n", int),
+                   basin=opt("basin", BasinTest.from_dict),
                    measured_ms=opt("measured_ms", float))
 
 

@@ -39,7 +39,7 @@ from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
 from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution,
+from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution, cm_written,
                       displacement_px, local_optimum, pixel_fd_step, quality_report)
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
@@ -95,16 +95,11 @@ Z95 = 1.959964
 # --- the evidence as typed records ----------------------------------------------------------
 # Each record holds the figures result.json writes, in metres and degrees: a figure written in
 # cm, rounded to k decimals, is held as that rounded figure / 100, and written back by
-# :func:`_cm` (rounding again to k decimals recovers the written figure exactly).
-
-def _cm(m: float, digits: int) -> float:
-    """``m`` metres in centimetres as result.json writes them, rounded to ``digits``."""
-    return round(float(m) * 100.0, digits)
-
+# cm_written (rounding again to k decimals recovers the written figure exactly).
 
 def _cm_or_none(m: float, digits: int) -> float | None:
-    """:func:`_cm`, None where not finite."""
-    return _cm(m, digits) if np.isfinite(m) else None
+    """:func:`~paretocal.quality.cm_written`, None where not finite."""
+    return cm_written(m, digits) if np.isfinite(m) else None
 
 
 def _rounded_si(v_report, digits: int) -> np.ndarray:
@@ -825,7 +820,7 @@ def start_text(start: StartComparison) -> str:
                 "it may still be wrong")
     return (f"the frames do not clearly prefer the result to the initial extrinsic ({k} of {n} "
             f"frames fit the start better; the result is {start.separation_deg:.2g} deg / "
-            f"{_cm(start.separation_m, 3):.2g} cm from it): keep the initial extrinsic until a "
+            f"{cm_written(start.separation_m, 3):.2g} cm from it): keep the initial extrinsic until a "
             "calibration is judged ok")
 
 
@@ -1126,17 +1121,17 @@ def reliability(result: "CalibrationResult") -> Reliability:
             reasons.append(f"the objective still falls beyond the search bound on "
                            f"{', '.join(beyond)}: the optimum lies outside the box; widen "
                            "--bound-t / --bound-r")
-    basin = (None if result.decision is None else result.decision.basin) or {}
-    if basin.get("ambiguous"):
-        alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
-        p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]
-        beyond = basin["kept"] == "near"
+    basin = None if result.decision is None else result.decision.basin
+    if basin is not None and basin.ambiguous:
+        alt = f"{basin.separation_deg:.2g} deg / {cm_written(basin.separation_m, 3):.2g} cm"
+        p = _nan(basin.p) if basin.kept == "far" else 1.0 - _nan(basin.p)
+        near_kept = basin.kept == "near"
         where = ("the result is the optimum next to the initial extrinsic, the other lies "
-                 "beyond the stated --init-error" if beyond else
+                 "beyond the stated --init-error" if near_kept else
                  "the result is the one that fits better")
         reasons.append(
             f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
-            f"{basin['frames']} frames: p = {p:.2g}); {where}; add frames with more varied "
+            f"{basin.frames} frames: p = {p:.2g}); {where}; add frames with more varied "
             "structure, or state a smaller --init-error if the start is known to be close")
     mo = result.motion or {}
     if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
@@ -1174,7 +1169,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
         how = ("fits the frames better" if r.mean_px > 0 else
                "fits the frames about as well")
         reasons.append(f"an independent restart of the search ended {r.separation_deg:.2g} deg"
-                       f" / {_cm(r.separation_m, 3):.2g} cm away and {how} "
+                       f" / {cm_written(r.separation_m, 3):.2g} cm away and {how} "
                        f"({r.frames_restart_better} of {r.frames} frames prefer it): the frames "
                        "do not single out one pose; add frames with more varied structure "
                        "(buildings, poles, cars at several distances), or a better --init with "
@@ -1184,7 +1179,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
         c = next(c for c in checks if c.name == name)
         reasons.append(
             f"the cameras disagree: camera {name}'s frames alone prefer a pose "
-            f"{c.separation_deg:.2g} deg / {_cm(c.separation_m, 3):.2g} cm away, moving its "
+            f"{c.separation_deg:.2g} deg / {cm_written(c.separation_m, 3):.2g} cm away, moving its "
             f"points {c.own_optimum_px:.2g} px (its edges are trusted to "
             f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
             "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
