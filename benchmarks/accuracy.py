@@ -545,7 +545,7 @@ def _run_api(args, ds: Dataset, view: Path, T_init: np.ndarray) -> dict:
             args.init_error or states_init_error(args.config)))
     except ParetocalError as exc:
         return {"exit": 2, "error": str(exc)}
-    rel = r.reliability or {}
+    rel = r.reliability.to_dict() if r.reliability is not None else {}     # result.json's form
     return {"T": r.T_cam_lidar, "n": int(r.n_points), "verdict": rel.get("verdict"),
             "reasons": list(rel.get("reasons") or []), "reliability": rel}
 

@@ -175,7 +175,7 @@ def run_trial(case: Case, k: int, work: Path) -> dict:
         row.update(error=str(exc), wall_s=time.perf_counter() - t0)
         return row
     e = pose_error(r.T_cam_lidar, T_ref)
-    rel = r.reliability
+    rel = r.reliability.to_dict()                  # as result.json writes it (cm and deg)
     d = correction_between(r.T_cam_lidar, T_ref) * TO_REPORT
     iv = rel.get("intervals") or {}
     half = iv.get("half_width") or {}
@@ -189,7 +189,8 @@ def run_trial(case: Case, k: int, work: Path) -> dict:
                  for i, a in enumerate(AXES)},
         jackknife_se=None if r.quality is None else r.quality.to_dict()["jackknife_se"],
         resolution_per_px=iv.get("resolution_per_px"),
-        evidence=rel.get("evidence"), basin=(r.decision or {}).get("basin"),
+        evidence=rel.get("evidence"),
+        basin=None if r.decision.basin is None else r.decision.basin.to_dict(),
         verdict_s=float(r.timings.get("verdict", 0.0)), total_s=float(r.timings["total"]),
         wall_s=time.perf_counter() - t0)
     return row

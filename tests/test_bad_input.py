@@ -669,9 +669,21 @@ def test_a_correction_held_by_the_bounds_is_flagged(capfd, tmp_path, rig3, pertu
     assert "WARNING: the result may be unreliable" in err
 
 
+def _basin(**over):
+    """A near/far basin test of two basins (:class:`paretocal.search.basin.BasinTest`)."""
+    from paretocal.search.basin import BasinTest
+
+    doc = {"separation_px": 45.7, "separation_deg": 3.6163, "separation_cm": 11.749,
+           "departure_near": 0.4, "departure_far": 0.3, "same_basin": False, "mean_px": 0.02,
+           "se_px": 0.05, "t": 0.4, "alternative": [0.1, 0, 0, 3.6, 0, 0], "rebuilt": False}
+    return BasinTest.from_dict({**doc, **over})
+
+
 def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
+    from paretocal.decide import Decision
     from paretocal.quality import AXES, UNITS, Quality
+    from paretocal.verdict import Evidence
 
     # In result.json's form (cm and deg), read back as the run holds it.
     q = {"units": dict(zip(AXES, UNITS)), "jackknife_se": dict.fromkeys(AXES, 0.1),
@@ -682,9 +694,12 @@ def _fake_result(**over):
     X[0, :6] = over.pop("x", np.zeros(6))
     deg, m = over.pop("init_error", (10.0, 0.3))
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
-                        front=SimpleNamespace(X=X), quality=q, decision={}, motion=None,
+                        front=SimpleNamespace(X=X), quality=q,
+                        decision=Decision(rule="knee", deviation_px=0.0,
+                                          basin=over.pop("basin", None)), motion=None,
                         feature_counts=over.pop("feature_counts", {}),
-                        evidence=over.pop("evidence", None), wide=over.pop("wide", None),
+                        evidence=Evidence.from_dict(over.pop("evidence", {})),
+                        wide=over.pop("wide", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,
                                                             "init_error_deg": deg,
                                                             "init_error_m": m}))
@@ -741,6 +756,11 @@ def _fake_result(**over):
                "apart that the frames do not tell apart"}},
      "the wide search found two poses 2.9 deg / 203 cm apart"),
     ({"wide": {"applied": True, "ambiguity": None, "disagree": True}}, None),
+    # The near/far basin test of the front: two poses the frames do not tell apart.
+    ({"basin": _basin(ambiguous=True, kept="near", p=0.2, frames=4)},
+     "ambiguous: a pose 3.6 deg / 12 cm away fits the frames about as well (paired test over "
+     "4 frames: p = 0.8); the result is the optimum next to the initial extrinsic"),
+    ({"basin": _basin(ambiguous=False, kept="far", p=0.001, frames=4)}, None),
     # Photo-consistency checks the calibration that followed a wide start.
     ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
         "agree": False, "result": 0.512, "rival": 0.47, "separation_deg": 3.1,
@@ -781,11 +801,11 @@ def test_reliability_reasons(over, reason):
 
     rel = reliability(_fake_result(**over))
     if reason is None:
-        assert rel["verdict"] == "ok" and rel["reasons"] == []
+        assert rel.verdict == "ok" and rel.reasons == ()
     else:
-        assert rel["verdict"] == "unreliable" and len(rel["reasons"]) == 1, rel
-        assert reason in rel["reasons"][0], rel["reasons"]
-    json.dumps(rel, allow_nan=False)                     # plain JSON
+        assert rel.verdict == "unreliable" and len(rel.reasons) == 1, rel
+        assert reason in rel.reasons[0], rel.reasons
+    json.dumps(rel.to_dict(), allow_nan=False)           # plain JSON
 
 
 @pytest.mark.parametrize("over, ok", [({}, True), ({"frames": ["a", "b"]}, False)])
@@ -793,13 +813,18 @@ def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
     """An unreliable result's intervals are not what they claim (a wrong basin, frames that
     disagree): result.json keeps them under ``intervals_not_trusted`` and the console says
     none."""
-    from paretocal.verdict import interval_text, reliability
+    from paretocal.verdict import Intervals, interval_text, reliability
 
     iv = {"frame": "lidar", "units": {"x": "cm"}, "half_width": {"x": 1.5}, "undetermined": []}
     rel = reliability(_fake_result(evidence={"intervals": iv}, **over))
-    assert rel["verdict"] == ("ok" if ok else "unreliable")
-    assert rel["intervals"] == (iv if ok else None)
-    assert rel["intervals_not_trusted"] == (None if ok else iv)
+    written = Intervals.from_dict(iv).to_dict()
+    assert written["half_width"] == {"x": 1.5, "y": None, "z": None, "yaw": None, "pitch": None,
+                                     "roll": None}
+    assert rel.verdict == ("ok" if ok else "unreliable")
+    assert (rel.intervals is not None) == ok and (rel.intervals_not_trusted is None) == ok
+    doc = rel.to_dict()
+    assert doc["intervals"] == (written if ok else None)
+    assert doc["intervals_not_trusted"] == (None if ok else written)
     assert interval_text(rel) == ("x +-1.5 cm" if ok else None)
 
 

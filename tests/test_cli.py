@@ -267,10 +267,11 @@ def test_the_features_line_names_frames_whose_depth_edges_look_like_noise():
 
 def test_verdict_line_names_the_main_reason_and_counts_the_rest():
     from paretocal.cli import verdict_line
+    from paretocal.verdict import Reliability
 
-    assert verdict_line({"verdict": "ok", "reasons": [], "frames": 20}).startswith(
+    assert verdict_line(Reliability(verdict="ok", frames=20)).startswith(
         "paretocal: verdict OK")
-    line = verdict_line({"verdict": "unreliable", "reasons": ["a", "b", "c"], "frames": 2})
+    line = verdict_line(Reliability(verdict="unreliable", reasons=("a", "b", "c"), frames=2))
     assert line == "paretocal: verdict UNRELIABLE: a (and 2 more reasons in result.json)"
 
 

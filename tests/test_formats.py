@@ -781,11 +781,13 @@ class TestInitFormats:
 
 class TestWriteRun:
     def _result(self, T):
+        from paretocal.decide import Decision
+
         front = SimpleNamespace(X=np.array([[0.0] * 6 + [500.0]]), F=np.array([[1.0, 0.5]]),
                                 columns={"t_norm": [0.1], "m_norm": [0.2], "ms": [3.0],
                                          "bytes": [1000.0]})
         return SimpleNamespace(T_cam_lidar=T, front=front, chosen=0, n_points=500,
-                               decision={"rule": "knee"},
+                               decision=Decision(rule="knee", deviation_px=0.0),
                                to_dict=lambda: {"T_cam_lidar": T.tolist(), "version": "0.test"})
 
     def test_every_run_directory_gets_the_exports(self, tmp_path, raw_frames, T_est):

@@ -151,11 +151,11 @@ class TestPage:
         result, _, out = run
         text = (out / "interactive.html").read_text(encoding="utf-8")
         # Two frames: unreliable, with every reason listed in a visible banner.
-        assert result.reliability["verdict"] == "unreliable"
+        assert result.reliability.verdict == "unreliable"
         banner = re.search(r'<div id="verdict" class="verdict unreliable">(.*?)</div>', text,
                            re.S)
         assert banner and "UNRELIABLE" in banner.group(1)
-        assert banner.group(1).count("<li>") == len(result.reliability["reasons"])
+        assert banner.group(1).count("<li>") == len(result.reliability.reasons)
         assert "only 2 frame(s)" in banner.group(1)
         assert "95 % intervals" not in banner.group(1)              # none for an unreliable result
 

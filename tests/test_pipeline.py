@@ -121,7 +121,7 @@ def test_recovers_reference_from_a_perturbed_start(raw_frames):
     assert X[:, 6].max() > 0.5 * r.n_range[1] and X[:, 6].min() < 0.1 * r.n_range[1]
     best = int(np.argmin(r.front.F[:, 0]))
     assert cols["ref_rotation_deg"][best] < 0.3 and cols["ref_translation_cm"][best] < 3.0
-    assert r.decision["deviation_px"] <= r.settings.decision.max_deviation_px
+    assert r.decision.deviation_px <= r.settings.decision.max_deviation_px
 
 
 def test_frames_without_points_in_view_do_not_count(raw_frames):
@@ -131,10 +131,10 @@ def test_frames_without_points_in_view_do_not_count(raw_frames):
                                 for f in raw_frames[1:3]]
     r = calibrate(frames, raw_frames[0].T_ref, _small())
     assert r.feature_counts["frames_contributing"] == 1
-    assert r.reliability["verdict"] == "unreliable"
+    assert r.reliability.verdict == "unreliable"
     assert any("only 1 of the 3 frames have LiDAR feature points" in x
-               for x in r.reliability["reasons"])
+               for x in r.reliability.reasons)
     # The clean frames count in full.
     ok = calibrate(raw_frames[:3], raw_frames[0].T_ref, _small())
     assert ok.feature_counts["frames_contributing"] == 3
-    assert not any("frames have LiDAR feature points" in x for x in ok.reliability["reasons"])
+    assert not any("frames have LiDAR feature points" in x for x in ok.reliability.reasons)

@@ -99,6 +99,43 @@ def test_neighbour_fraction_at_and_away_from_the_minimum(bowls):
     assert frac1 > 0.2 and gain1 > 0
 
 
+def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
+    """A check's report: the move in m and deg, written in cm and deg as the extrinsics
+    imply; the tolerances written as given (7 cm, which m * 100 alone writes
+    7.000000000000001); read back, the same JSON."""
+    import json
+
+    from paretocal.check import NEIGHBOUR_STEP, CheckReport
+    from paretocal.geometry import correction_matrix, pose_error
+
+    q = quality_report(bowls, np.r_[bowls.m.mean(axis=0), 100.0])
+    T = correction_matrix([0.1, -0.2, 0.3, 1.0, 2.0, -3.0])
+    T_opt = T @ correction_matrix([0.013, -0.004, 0.007, 0.2, -0.1, 0.05])
+    r = CheckReport(verdict="calibrated", score=0.43, notes=(), tolerance_deg=0.5,
+                    tolerance_m=0.07, moved_px=2.7, neighbour_fraction=0.01,
+                    best_neighbour_gain_px=0.002, neighbour_step=NEIGHBOUR_STEP, T_checked=T,
+                    T_local_optimum=T_opt, quality=q, frames=("a", "b", "c"),
+                    features={"frames_contributing": 3})
+    e = pose_error(T_opt, T)
+    assert not r.weak and r.moved_deg == pytest.approx(float(e["rotation_deg"]))
+    assert r.moved_m == pytest.approx(float(e["translation_cm"]) / 100)
+    doc = r.to_dict()
+    assert list(doc) == ["weak", "notes", "verdict", "score", "tolerances", "moved",
+                         "neighbour_fraction", "best_neighbour_gain_px", "neighbour_step",
+                         "T_checked", "T_local_optimum", "quality", "frames", "features"]
+    assert doc["tolerances"] == {"rotation_deg": 0.5, "translation_cm": 7.0}
+    assert doc["neighbour_step"] == {"translation_cm": 5.0, "rotation_deg": 0.5}
+    assert doc["moved"] == {"rotation_deg": float(e["rotation_deg"]),
+                            "translation_cm": float(e["translation_cm"]), "pixels": 2.7}
+    assert doc["quality"] == q.to_dict() and doc["T_checked"] == T.tolist()
+    named = r.with_source("dataset")
+    assert named.to_dict()["extrinsic_from"] == "dataset" and "extrinsic_from" not in doc
+    text = json.dumps(named.to_dict(), indent=2)
+    assert json.dumps(CheckReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
+    weak = CheckReport.from_dict(dict(doc, notes=["only 2 frame(s)"]))
+    assert weak.weak and weak.to_dict()["weak"] is True
+
+
 @pytest.mark.slow
 class TestCheckOnKitti:
     """`check` passes KITTI's reference and flags 1 deg or 10 cm (all 20 sample frames)."""
@@ -114,7 +151,7 @@ class TestCheckOnKitti:
 
         T = raw_frames[0].T_ref @ correction_matrix(perturbation)
         r = check_extrinsic(raw_frames, T)
-        assert r["verdict"] == verdict, r["moved"]
+        assert r.verdict == verdict, r.to_dict()["moved"]
 
     def test_a_cloud_in_a_vehicle_frame_is_checked_like_the_sensor_frame(self, raw_frames):
         """The check does the LiDAR steps of a calibration: the sensor located in a cloud
@@ -130,6 +167,6 @@ class TestCheckOnKitti:
         frames = [replace(f, points=to_vehicle_frame(kitti_truth(f.points), P).points,
                           ring=None, sensor_pose=None) for f in raw_frames[::4]]
         r = check_extrinsic(frames, raw_frames[0].T_ref @ invert(P))
-        assert r["verdict"] == "calibrated", r["moved"]
-        assert r["neighbour_fraction"] <= 0.05
+        assert r.verdict == "calibrated", r.to_dict()["moved"]
+        assert r.neighbour_fraction <= 0.05
 

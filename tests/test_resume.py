@@ -409,7 +409,7 @@ def test_decision_settings_keep_the_checkpoint_valid(tmp_path, start, caplog):
     with caplog.at_level("INFO", logger="paretocal"):
         r = calibrate(frames, T, BUDGET, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))
     assert "resuming the search at generation 7" in caplog.text
-    assert r.decision["rule"] == "budget"
+    assert r.decision.rule == "budget"
     changed = SMALL.replace(search={"seed": 4})           # the search's own settings still do
     with pytest.raises(InputError, match="another run"):
         calibrate(frames, T, changed, checkpoint=Checkpoint(tmp_path / "ck.npz", every=3))

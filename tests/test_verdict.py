@@ -2,6 +2,7 @@
 it and quiet at the reference. The reasons' wording is tested in test_bad_input.py."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -9,8 +10,10 @@ import pytest
 from paretocal.config import Settings
 from paretocal.stage import Stage
 from paretocal.quality import AXES, axis_resolution
-from paretocal.verdict import (Z95, alignment_px, contrast_evidence, interval_text, intervals,
-                               pose_per_px, restart_evidence)
+from paretocal.verdict import (Z95, CameraAgreement, Evidence, Intervals, Reliability,
+                               RestartCheck, StartComparison, alignment_px, contrast_evidence,
+                               interval_text, intervals, pose_per_px, restart_evidence,
+                               verdict_text)
 
 SETTINGS = Settings().replace(search={"pop": 60, "gens": 30},
                               decision={"restarts": 1, "restart_share": 1.0})
@@ -34,19 +37,24 @@ def test_a_restart_finds_the_truth_when_the_result_is_a_wrong_pose(stage):
     wrong = _full(stage, [0.0, 0.0, 0.0, 6.0, 0.0, 0.0])
     ev = restart_evidence(stage.objective, SETTINGS.search, SETTINGS.decision, stage.n_min,
                           stage.n_max, wrong, wrong)
-    (run,) = ev["runs"]
-    assert ev["disagrees"] and run["distinct"] and run["mean_px"] > 0, run
-    assert run["separation_deg"] > 3.0
-    assert run["frames_restart_better"] >= 5
+    (run,) = ev.runs
+    assert ev.disagrees and run.distinct and run.mean_px > 0, run
+    assert run.separation_deg > 3.0
+    assert run.frames_restart_better >= 5
 
 
 def test_a_restart_agrees_with_the_reference(stage):
     truth = _full(stage, np.zeros(6))
     ev = restart_evidence(stage.objective, SETTINGS.search, SETTINGS.decision, stage.n_min,
                           stage.n_max, truth)
-    (run,) = ev["runs"]
-    assert not ev["disagrees"], run
-    assert run["separation_deg"] < 1.0 and run["separation_cm"] < 10.0
+    (run,) = ev.runs
+    assert not ev.disagrees, run
+    assert run.separation_deg < 1.0 and run.separation_m < 0.10
+    # result.json's form: the separation in cm; read back, the same run.
+    doc = ev.to_dict()
+    assert set(doc) == {"runs", "disagrees", "evaluations"}
+    assert doc["runs"][0]["separation_cm"] == pytest.approx(100 * run.separation_m)
+    assert RestartCheck.from_dict(doc).to_dict() == doc
 
 
 def test_no_restart_when_switched_off(stage):
@@ -54,7 +62,11 @@ def test_no_restart_when_switched_off(stage):
 
     s = SETTINGS.replace(decision={"restarts": 0})
     ev = gather_evidence(stage.objective, s, stage.n_min, stage.n_max, _full(stage, np.zeros(6)))
-    assert "restart" not in ev and set(ev) == {"contrast", "start", "intervals"}
+    assert ev.restart is None and ev.cameras is None
+    assert set(ev.to_dict()) == {"contrast", "start", "intervals"}
+    assert list(ev.to_dict(intervals=False)) == ["contrast", "start"]
+    doc = ev.to_dict()
+    assert json.dumps(Evidence.from_dict(json.loads(json.dumps(doc))).to_dict()) == json.dumps(doc)
 
 
 def test_local_optima_polished_together_are_those_polished_alone(stage):
@@ -101,9 +113,9 @@ def test_images_of_other_frames_do_not_agree_with_the_clouds(raw_frames):
         st = Stage(fr, T, T, SETTINGS)
         x = local_optimum(st.objective, _full(st, np.zeros(6)))
         out[name] = contrast_evidence(st.objective, SETTINGS.search, x, rng=3)
-    assert out["right"]["z"] > CONTRAST_MIN_Z + 1.0 and out["right"]["frames_clear"] == 1.0, out
-    assert out["swapped"]["z"] < CONTRAST_MIN_Z and out["upside down"]["z"] < CONTRAST_MIN_Z, out
-    assert out["right"]["margin_px"] > 1.5 * out["swapped"]["margin_px"]
+    assert out["right"].z > CONTRAST_MIN_Z + 1.0 and out["right"].frames_clear == 1.0, out
+    assert out["swapped"].z < CONTRAST_MIN_Z and out["upside down"].z < CONTRAST_MIN_Z, out
+    assert out["right"].margin_px > 1.5 * out["swapped"].margin_px
 
 
 def test_resolution_is_the_step_that_moves_points_one_pixel(stage):
@@ -124,27 +136,40 @@ def test_intervals_combine_jackknife_and_alignment():
     se = np.array([0.03, 0.04, np.nan, 0.1, 50.0, 0.0])
     per_px = np.array([0.04, 0.0, 0.01, 0.0, 0.1, 0.2])      # m and deg per pixel rms
     iv = intervals(se, per_px, 1.5, Settings().search)
-    h = iv["half_width"]
+    # In m and deg; result.json's form in cm and deg, by axis name.
+    assert iv.half_width[0] == pytest.approx(np.hypot(Z95 * 0.03, 1.5 * 0.04), rel=1e-4)
+    doc = iv.to_dict()
+    h = doc["half_width"]
     assert h["x"] == pytest.approx(np.hypot(Z95 * 3.0, 1.5 * 4.0), rel=1e-4)    # cm
     assert h["y"] == pytest.approx(Z95 * 4.0, rel=1e-4)
     assert h["roll"] == pytest.approx(1.5 * 0.2, rel=1e-4)
     # No jackknife (one frame) or wider than the stated initial error (10 deg): undetermined.
-    assert iv["undetermined"] == ["z", "pitch"] and h["z"] is None and h["pitch"] is None
-    assert iv["frame"] == "lidar" and iv["alignment_px"] == 1.5 and iv["per_px"]["x"] == 4.0
-    text = interval_text({"intervals": iv})
+    assert iv.undetermined == ("z", "pitch") and h["z"] is None and h["pitch"] is None
+    assert doc["undetermined"] == ["z", "pitch"] and np.isnan(iv.half_width[2])
+    assert doc["frame"] == "lidar" and doc["alignment_px"] == 1.5 and doc["per_px"]["x"] == 4.0
+    assert doc["units"] == {"x": "cm", "y": "cm", "z": "cm", "yaw": "deg", "pitch": "deg",
+                            "roll": "deg"}
+    assert doc["jackknife_se"] == {"x": 3.0, "y": 4.0, "z": None, "yaw": 0.1, "pitch": 50.0,
+                                   "roll": 0.0}
+    assert iv.per_px[0] == 0.04 and iv.jackknife_se[3] == 0.1                  # m, deg
+    back = Intervals.from_dict(json.loads(json.dumps(doc)))
+    assert back.to_dict() == doc and back.undetermined == iv.undetermined
+    text = interval_text(Reliability(verdict="ok", evidence=Evidence(intervals=iv)))
     assert text.startswith(f"x +-{h['x']:.2g} cm, y +-7.8 cm") and text.endswith(
         "not determined by the data: z, pitch")
-    assert interval_text({}) is None
+    assert interval_text(None) is None and interval_text(Reliability(verdict="ok")) is None
     # A shared bias bounded per axis (the LiDAR's sampling) replaces alignment x per pixel.
     bias = np.array([0.09, 0.0, 0.01, 0.0, 0.1, 0.6])                # m and deg
     iv = intervals(se, per_px, 1.5, Settings().search,
                    sampling_px=np.array([7.0, 6.0]), bias=bias)
-    assert iv["half_width"]["x"] == pytest.approx(np.hypot(Z95 * 3.0, 9.0), rel=1e-4)
-    assert iv["half_width"]["roll"] == pytest.approx(0.6, rel=1e-4)
-    assert iv["sampling_px"] == [7.0, 6.0] and iv["bias"]["x"] == 9.0
+    doc = iv.to_dict()
+    assert doc["half_width"]["x"] == pytest.approx(np.hypot(Z95 * 3.0, 9.0), rel=1e-4)
+    assert doc["half_width"]["roll"] == pytest.approx(0.6, rel=1e-4)
+    assert doc["sampling_px"] == [7.0, 6.0] and doc["bias"]["x"] == 9.0
+    assert iv.bias[0] == 0.09 and "resolution_per_px" not in doc
     # Without any matched edge the alignment is unknown: nothing is determined.
-    assert intervals(se, per_px, float("nan"),
-                     Settings().search)["undetermined"] == list(AXES)
+    none = intervals(se, per_px, float("nan"), Settings().search)
+    assert none.undetermined == tuple(AXES) and none.to_dict()["alignment_px"] is None
 
 
 def test_the_bias_tolerance_is_the_alignment_or_half_the_sampling_step():
@@ -223,30 +248,35 @@ def test_the_start_is_compared_with_an_untrusted_result(stage, raw_frames):
 
     wrong = _full(stage, [0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
     ev = start_evidence(stage.objective, wrong)             # the start is the reference
-    assert not ev["result_clearly_better"] and ev["mean_px"] > 0
-    assert ev["frames_start_better"] >= 5 and ev["separation_deg"] == pytest.approx(3.0, abs=1e-6)
+    assert not ev.result_clearly_better and ev.mean_px > 0
+    assert ev.frames_start_better >= 5 and ev.separation_deg == pytest.approx(3.0, abs=1e-6)
     assert "keep the initial extrinsic" in start_text(ev)
+    doc = ev.to_dict()
+    assert list(doc) == ["separation_deg", "separation_cm", "mean_px", "frames",
+                         "frames_start_better", "p_start_better", "result_clearly_better"]
+    assert StartComparison.from_dict(doc).to_dict() == doc
 
     frames = raw_frames[:6]
     T_start = frames[0].T_ref @ correction_matrix([0.0, 0.0, 0.0, 3.0, 0.0, 0.0])
     off = Stage(frames, frames[0].T_ref, T_start, SETTINGS)
     truth = _full(off, correction_params(invert(T_start) @ frames[0].T_ref))
     ev = start_evidence(off.objective, truth)
-    assert ev["result_clearly_better"] and ev["frames_start_better"] <= 1
+    assert ev.result_clearly_better and ev.frames_start_better <= 1
     assert "do prefer the result" in start_text(ev)
 
 
 def test_the_verdict_line_of_an_untrusted_result_says_how_the_start_compares():
-    from paretocal.verdict import verdict_text
-
-    start = {"separation_deg": 2.5, "separation_cm": 14.0, "mean_px": 0.2, "frames": 8,
-             "frames_start_better": 6, "p_start_better": 0.02, "result_clearly_better": False}
-    line = verdict_text({"verdict": "unreliable", "reasons": ["the frames disagree"],
-                         "start": start})
+    start = StartComparison(separation_deg=2.5, separation_m=0.14, mean_px=0.2, frames=8,
+                            frames_start_better=6, p_start_better=0.02,
+                            result_clearly_better=False)
+    rel = Reliability(verdict="unreliable", reasons=("the frames disagree",),
+                      evidence=Evidence(start=start), frames=8)
+    assert rel.start is start
+    line = verdict_text(rel)
     assert line.startswith("UNRELIABLE: the frames disagree; ") and "6 of 8 frames" in line
-    assert "keep the initial extrinsic" in line
-    ok = verdict_text({"verdict": "ok", "reasons": [], "frames": 8, "start": None})
-    assert "initial extrinsic" not in ok
+    assert "keep the initial extrinsic" in line and "2.5 deg / 14 cm from it" in line
+    ok = verdict_text(Reliability(verdict="ok", evidence=Evidence(start=start), frames=8))
+    assert "initial extrinsic" not in ok and "(8 frames)" in ok
 
 
 def test_cameras_that_share_a_pose_agree_and_a_wrong_mount_disagrees(raw_frames):
@@ -271,10 +301,113 @@ def test_cameras_that_share_a_pose_agree_and_a_wrong_mount_disagrees(raw_frames)
         return camera_evidence(st.objective, x, groups)
 
     same = check(np.eye(4))
-    assert same["disagreeing"] == [], same
-    for c in same["cameras"]:
-        assert c["checked"] and c["own_optimum_px"] < c["tolerance_px"]
+    assert same.disagreeing == (), same
+    for c in same.cameras:
+        assert c.checked and c.own_optimum_px < c.tolerance_px
     wrong = check(correction_matrix(np.r_[0, 0, 0, 1.5, 0, 0]))
-    assert wrong["disagreeing"] == ["a", "b"], wrong
-    for c in wrong["cameras"]:
-        assert c["separation_deg"] > 0.4 and c["own_optimum_px"] > c["tolerance_px"]
+    assert wrong.disagreeing == ("a", "b"), wrong
+    for c in wrong.cameras:
+        assert c.separation_deg > 0.4 and c.own_optimum_px > c.tolerance_px
+    # result.json's form: the separation and the correction d in cm and deg.
+    doc = wrong.to_dict()
+    assert doc["disagreeing"] == ["a", "b"] and set(doc["cameras"][0]["d"]) == set(AXES)
+    c = wrong.cameras[0]
+    assert doc["cameras"][0]["d"]["x"] == pytest.approx(100 * c.d[0])
+    assert doc["cameras"][0]["separation_cm"] == pytest.approx(100 * c.separation_m)
+    assert CameraAgreement.from_dict(doc).to_dict() == doc
+
+
+#: The verdict of a KITTI demo run as result.json writes it (its intervals and evidence).
+WRITTEN = {
+    "intervals": {
+        "frame": "lidar", "units": {"x": "cm", "y": "cm", "z": "cm", "yaw": "deg",
+                                    "pitch": "deg", "roll": "deg"},
+        "jackknife_se": {"x": 0.2777, "y": 0.09765, "z": 0.34804, "yaw": 0.00579,
+                         "pitch": 0.02453, "roll": 0.05723},
+        "half_width": {"x": 3.1348, "y": 4.0567, "z": 3.9624, "yaw": 0.2359, "pitch": 0.2888,
+                       "roll": 0.3502},
+        "determined": {"x": True, "y": True, "z": True, "yaw": True, "pitch": True,
+                       "roll": True},
+        "undetermined": [], "alignment_px": 1.5553, "sampling_px": [2.478, 5.483],
+        "per_px": {"x": 1.98501, "y": 2.60544, "z": 2.50967, "yaw": 0.15153, "pitch": 0.18307,
+                   "roll": 0.2133},
+        "bias": {"x": 3.08722, "y": 4.05215, "z": 3.90321, "yaw": 0.23568, "pitch": 0.28473,
+                 "roll": 0.33174},
+        "resolution_per_px": {"x": 2.38772, "y": 1.14788, "z": 1.13613, "yaw": 0.06451,
+                              "pitch": 0.07546, "roll": 0.19794}},
+    "contrast": {"poses": 64, "margin_px": 2.4152, "z": 5.328, "frames_clear": 1.0,
+                 "beaten": 1.0, "group_ratio": {"depth_edge": 0.6431, "intensity_edge": 0.8075,
+                                                "smooth": None}},
+    "start": {"separation_deg": 4.1358, "separation_cm": 3.665, "mean_px": -1.49547,
+              "frames": 20, "frames_start_better": 0, "p_start_better": 1.0,
+              "result_clearly_better": True},
+    "restart": {"runs": [{"separation_deg": 0.0433, "separation_cm": 1.082,
+                          "separation_px": 0.652, "same_basin": True, "distinct": False,
+                          "mean_px": 0.0004, "p_restart_better": None,
+                          "frames_restart_better": 11, "frames": 20, "evaluations": 9000,
+                          "correction": [0.006901507305925346, 0.03823361620479052,
+                                         -0.002001173919326024, -2.817013995782635,
+                                         0.16370935968776631, -3.070005178327917]}],
+                "disagrees": False, "evaluations": 9000},
+    "cameras": {"cameras": [{"name": "front", "frames": 5, "checked": True,
+                             "own_optimum_px": 0.812, "tolerance_px": 1.6, "agrees": True,
+                             "separation_deg": 0.0312, "separation_cm": 0.9,
+                             "d": {"x": 1.7, "y": -3.3, "z": 0.0, "yaw": 0.0123,
+                                   "pitch": -0.0045, "roll": 0.0}},
+                            {"name": "left", "frames": 2, "checked": False}],
+                "disagreeing": []},
+}
+
+
+def test_the_evidence_is_held_in_metres_and_written_as_it_was():
+    """Read back from result.json's form, the evidence is in metres and degrees (a figure
+    written in cm is held / 100), and written again it is the same text, figure for figure:
+    also the cm figures that do not survive / 100 * 100 in floating point (0.9, 1.7, 3.3)."""
+    from paretocal.verdict import Contrast
+
+    written = {k: WRITTEN[k] for k in ("contrast", "start", "intervals", "restart", "cameras")}
+    ev = Evidence.from_dict(json.loads(json.dumps(WRITTEN)))
+    assert json.dumps(ev.to_dict()) == json.dumps(written)
+    assert list(ev.to_dict(intervals=False)) == ["contrast", "start", "restart", "cameras"]
+    assert ev.start.separation_m == pytest.approx(0.03665)
+    assert ev.restart.runs[0].separation_m == pytest.approx(0.01082)
+    assert np.isnan(ev.restart.runs[0].p_restart_better)
+    assert ev.intervals.half_width[0] == pytest.approx(0.031348)
+    assert ev.intervals.half_width[3] == 0.2359                           # deg
+    assert ev.intervals.sampling_px.tolist() == [2.478, 5.483]
+    np.testing.assert_allclose(ev.cameras.cameras[0].d, [0.017, -0.033, 0.0, 0.0123, -0.0045, 0])
+    assert ev.cameras.cameras[1].agrees is None and ev.cameras.cameras[1].to_dict() == {
+        "name": "left", "frames": 2, "checked": False}
+    assert isinstance(ev.contrast, Contrast) and np.isnan(ev.contrast.group_ratio[2])
+    assert ev.intervals.half_width_report() == WRITTEN["intervals"]["half_width"]
+    assert Evidence.from_dict({}).to_dict() == {}
+
+
+def test_the_verdict_is_written_as_result_json_has_it():
+    """A verdict read back from result.json's form: its intervals are those of the evidence,
+    trusted or not by the verdict; written again, the same text."""
+    evidence = {k: WRITTEN[k] for k in ("contrast", "start", "restart")}
+    ok = {"verdict": "ok", "reasons": [], "intervals": WRITTEN["intervals"],
+          "intervals_not_trusted": None, "evidence": evidence, "start": None, "frames": 20,
+          "in_view": 0.8489, "at_bound": [], "max_jackknife_se_deg": 0.0572,
+          "max_jackknife_se_cm": 0.348}
+    rel = Reliability.from_dict(json.loads(json.dumps(ok)))
+    assert rel.ok and rel.intervals is rel.evidence.intervals and rel.start is None
+    assert rel.max_jackknife_se_m == pytest.approx(0.00348) and rel.in_view == 0.8489
+    assert json.dumps(rel.to_dict()) == json.dumps(ok)
+    assert interval_text(rel).startswith("x +-3.1 cm, y +-4.1 cm, z +-4 cm, yaw +-0.24 deg")
+
+    bad = dict(ok, verdict="unreliable", reasons=["the frames disagree", "at a bound"],
+               intervals=None, intervals_not_trusted=WRITTEN["intervals"],
+               start=WRITTEN["start"], in_view=None, at_bound=["z"],
+               max_jackknife_se_deg=None, max_jackknife_se_cm=None)
+    rel = Reliability.from_dict(json.loads(json.dumps(bad)))
+    assert not rel.ok and rel.intervals is None and rel.intervals_not_trusted is not None
+    assert rel.start.separation_m == pytest.approx(0.03665) and np.isnan(rel.in_view)
+    assert json.dumps(rel.to_dict()) == json.dumps(bad)
+    assert interval_text(rel) is None
+    assert verdict_text(rel).startswith("UNRELIABLE: the frames disagree (and 1 more reason in "
+                                        "result.json); the frames do prefer the result")
+    nothing = Reliability(verdict="ok", frames=3).to_dict()
+    assert nothing["evidence"] is None and nothing["intervals"] is None
+    assert nothing["in_view"] is None and nothing["max_jackknife_se_cm"] is None

@@ -85,7 +85,7 @@ def test_calibrate_runs_the_wide_start_and_records_it(raw_frames):
                                                                                   AFTER_M)
     e = pose_error(r.T_cam_lidar, T_ref)
     assert e["rotation_deg"] < 1.0 and e["translation_cm"] < 10.0
-    assert r.reliability["verdict"] == "ok", r.reliability["reasons"]
+    assert r.reliability.verdict == "ok", r.reliability.reasons
     doc = r.to_dict()
     assert doc["wide_start"]["applied"] and "wide" in doc["timings_s"]
     w = doc["wide_start"]

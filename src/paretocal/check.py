@@ -11,22 +11,160 @@ one axis moved 0.9-1.1 deg or 7-10 cm (4.6-15.6 px), so 0.5 deg / 5 cm are the d
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .config import Settings
 from .geometry import pose_error
 from .io.frame import Frame
-from .quality import (displacement_px, local_optimum, neighbour_fraction, pixel_fd_step,
-                      quality_report)
+from .quality import (Quality, displacement_px, local_optimum, neighbour_fraction,
+                      pixel_fd_step, quality_report)
 
 NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
 
 
+def _given_cm(m: float) -> float:
+    """A length given in cm (a tolerance, a step) and held in m, in cm again: the figure as
+    given (to 12 significant digits, which ``m * 100`` alone can miss in the last bit)."""
+    return float(f"{float(m) * 100.0:.12g}")
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """The check of an extrinsic (:func:`check_extrinsic`), in metres and degrees.
+
+    Attributes
+    ----------
+    verdict : str
+        ``"calibrated"`` or ``"miscalibrated"``.
+    score : float
+        The move to the local optimum relative to the tolerances (the larger of rotation over
+        its tolerance and translation over its); above 1 is miscalibrated.
+    notes : tuple of str
+        What makes the check itself weak (fewer frames than a calibration needs to be
+        trusted), with what to do; empty when it is not (:attr:`weak`).
+    tolerance_deg : float
+        Rotation tolerance (deg).
+    tolerance_m : float
+        Translation tolerance (m).
+    moved_px : float
+        How far the local optimum moves the feature points from the extrinsic checked (px,
+        mean over the points).
+    neighbour_fraction : float
+        Share of the 3^6 - 1 grid neighbours of the extrinsic that score better.
+    best_neighbour_gain_px : float
+        The best neighbour's improvement (px).
+    neighbour_step : ndarray, shape (6,)
+        The grid's steps (m, deg).
+    T_checked : ndarray, shape (4, 4)
+        The extrinsic checked (``T_cam_lidar``).
+    T_local_optimum : ndarray, shape (4, 4)
+        The objective's local optimum from it.
+    quality : Quality
+        The quality report at the local optimum.
+    frames : tuple of str
+        The frames' names.
+    features : dict
+        What the objective compared (:func:`paretocal.stage.feature_counts`).
+    extrinsic_from : str or None
+        Where the extrinsic checked came from (``paretocal check``: its file, or
+        ``"dataset"``); written only when set.
+    """
+
+    verdict: str
+    score: float
+    notes: tuple[str, ...]
+    tolerance_deg: float
+    tolerance_m: float
+    moved_px: float
+    neighbour_fraction: float
+    best_neighbour_gain_px: float
+    neighbour_step: np.ndarray
+    T_checked: np.ndarray
+    T_local_optimum: np.ndarray
+    quality: Quality
+    frames: tuple[str, ...]
+    features: dict[str, Any]
+    extrinsic_from: str | None = None
+
+    @property
+    def weak(self) -> bool:
+        """Whether the check itself has too little to go on (:attr:`notes` say why)."""
+        return bool(self.notes)
+
+    def _moved(self) -> dict[str, np.ndarray]:
+        return pose_error(self.T_local_optimum, self.T_checked)
+
+    @property
+    def moved_deg(self) -> float:
+        """The rotation from the extrinsic checked to the local optimum (deg)."""
+        return float(self._moved()["rotation_deg"])
+
+    @property
+    def moved_m(self) -> float:
+        """The translation from the extrinsic checked to the local optimum (m)."""
+        return float(self._moved()["translation_cm"]) / 100.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The report as ``paretocal check --out`` writes it: the tolerances, the move and
+        the neighbours' step in cm and deg, the extrinsics as nested lists, the quality
+        report in its :meth:`~paretocal.quality.Quality.to_dict` form."""
+        moved = self._moved()
+        out = {
+            "weak": self.weak,
+            "notes": list(self.notes),
+            "verdict": self.verdict,
+            "score": float(self.score),
+            "tolerances": {"rotation_deg": float(self.tolerance_deg),
+                           "translation_cm": _given_cm(self.tolerance_m)},
+            "moved": {"rotation_deg": float(moved["rotation_deg"]),
+                      "translation_cm": float(moved["translation_cm"]),
+                      "pixels": float(self.moved_px)},
+            "neighbour_fraction": float(self.neighbour_fraction),
+            "best_neighbour_gain_px": float(self.best_neighbour_gain_px),
+            "neighbour_step": {"translation_cm": _given_cm(self.neighbour_step[0]),
+                               "rotation_deg": float(self.neighbour_step[3])},
+            "T_checked": np.asarray(self.T_checked).tolist(),
+            "T_local_optimum": np.asarray(self.T_local_optimum).tolist(),
+            "quality": self.quality.to_dict(),
+            "frames": list(self.frames),
+            "features": self.features,
+        }
+        if self.extrinsic_from is not None:
+            out["extrinsic_from"] = self.extrinsic_from
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "CheckReport":
+        """The report read back from its :meth:`to_dict` form."""
+        tol, step, moved = doc["tolerances"], doc["neighbour_step"], doc["moved"]
+        return cls(verdict=str(doc["verdict"]), score=float(doc["score"]),
+                   notes=tuple(str(n) for n in doc.get("notes") or []),
+                   tolerance_deg=float(tol["rotation_deg"]),
+                   tolerance_m=float(tol["translation_cm"]) / 100.0,
+                   moved_px=float(moved["pixels"]),
+                   neighbour_fraction=float(doc["neighbour_fraction"]),
+                   best_neighbour_gain_px=float(doc["best_neighbour_gain_px"]),
+                   neighbour_step=np.r_[[float(step["translation_cm"]) / 100.0] * 3,
+                                        [float(step["rotation_deg"])] * 3],
+                   T_checked=np.array(doc["T_checked"], dtype=np.float64),
+                   T_local_optimum=np.array(doc["T_local_optimum"], dtype=np.float64),
+                   quality=Quality.from_dict(doc.get("quality") or {}),
+                   frames=tuple(str(f) for f in doc.get("frames") or []),
+                   features=dict(doc.get("features") or {}),
+                   extrinsic_from=doc.get("extrinsic_from"))
+
+    def with_source(self, extrinsic_from: str) -> "CheckReport":
+        """The report naming where the extrinsic checked came from."""
+        return dataclasses.replace(self, extrinsic_from=extrinsic_from)
+
+
 def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | None = None,
                     rot_tol_deg: float = 0.5, trans_tol_cm: float = 5.0,
-                    progress=None) -> dict:
+                    progress=None) -> CheckReport:
     """Check ``T`` (4, 4) on ``frames``.
 
     ``progress(stage, done, total)``, if given, is told of the feature extraction per frame
@@ -34,14 +172,14 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
 
     Returns
     -------
-    dict
+    CheckReport
         ``verdict`` ("calibrated" or "miscalibrated"), ``score`` (the move to the local optimum
-        relative to the tolerances; above 1 is miscalibrated), ``moved`` (deg, cm, px),
-        ``neighbour_fraction`` and ``best_neighbour_gain_px``, ``T_checked`` (``T``),
-        ``T_local_optimum``, the
-        ``quality`` report at the local optimum, and ``weak`` with ``notes``: True when the
-        check itself has too little to go on (fewer frames than a calibration needs to be
-        trusted), with what to do.
+        relative to the tolerances; above 1 is miscalibrated), the move (``moved_deg``,
+        ``moved_m``, ``moved_px``), ``neighbour_fraction`` and ``best_neighbour_gain_px``,
+        ``T_checked`` (``T``), ``T_local_optimum``, the ``quality`` report at the local
+        optimum, and ``weak`` with ``notes``: True when the check itself has too little to go
+        on (fewer frames than a calibration needs to be trusted), with what to do
+        (:meth:`CheckReport.to_dict`: the JSON ``paretocal check --out`` writes).
     """
     from .inputs import prepare_lidar
     from .stage import Stage, feature_counts
@@ -66,10 +204,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     tick("check", 2, 3)
     T_opt = obj.transforms(xo[None])[0]
     move = pose_error(T_opt, T)
-    moved = {"rotation_deg": float(move["rotation_deg"]),
-             "translation_cm": float(move["translation_cm"]),
-             "pixels": displacement_px(obj, x0, xo)}
-    score = max(moved["rotation_deg"] / rot_tol_deg, moved["translation_cm"] / trans_tol_cm)
+    score = max(float(move["rotation_deg"]) / rot_tol_deg,
+                float(move["translation_cm"]) / trans_tol_cm)
     quality = quality_report(obj, xo, pixel_fd_step(obj, xo))
     tick("check", 3, 3)
     from .pipeline import RELIABLE_MIN_FRAMES
@@ -79,22 +215,15 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         notes.append(f"only {len(frames)} frame(s): the check itself is weak (one scene's "
                      "biases can move a correct extrinsic or hold a wrong one); check on at "
                      f"least {RELIABLE_MIN_FRAMES} frames of varied scenes")
-    return {
-        "weak": bool(notes),
-        "notes": notes,
-        "verdict": "miscalibrated" if score > 1.0 else "calibrated",
-        "score": float(score),
-        "tolerances": {"rotation_deg": rot_tol_deg, "translation_cm": trans_tol_cm},
-        "moved": moved,
-        "neighbour_fraction": frac,
-        "best_neighbour_gain_px": gain,
-        "neighbour_step": {"translation_cm": 5.0, "rotation_deg": 0.5},
-        "T_checked": T.tolist(),
-        "T_local_optimum": T_opt.tolist(),
-        "quality": quality.to_dict(),
-        "frames": [f.name for f in frames],
-        "features": feature_counts(stage.feats),
-    }
+    return CheckReport(
+        verdict="miscalibrated" if score > 1.0 else "calibrated", score=float(score),
+        notes=tuple(notes), tolerance_deg=float(rot_tol_deg),
+        tolerance_m=float(trans_tol_cm) / 100.0, moved_px=displacement_px(obj, x0, xo),
+        neighbour_fraction=frac, best_neighbour_gain_px=gain,
+        neighbour_step=NEIGHBOUR_STEP.copy(), T_checked=T, T_local_optimum=T_opt,
+        quality=quality, frames=tuple(f.name for f in frames),
+        features=feature_counts(stage.feats))
+
 
 
 # ------------------------------------------------------------------------------- comparison

@@ -70,6 +70,8 @@ def _choices(section: str, name: str, cls: str) -> type[Enum]:
 
 
 if TYPE_CHECKING:
+    from .verdict import Reliability
+
     # Classes made at run time from the configuration's lists, which the type checker cannot
     # read: to it they are enums of strings like any other.
     Rule = Enum
@@ -369,12 +371,12 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         if joint and name != names[0]:
             return
         ref = result.reference_error
-        rel = result.reliability
+        verdict = None if result.reliability is None else result.reliability.verdict
         what = f"cameras {', '.join(names)} at once" if joint else f"camera {name}"
         typer.echo(f"paretocal: {what}: {len(result.frames)} frames, chosen n = "
                    f"{result.n_points}; error vs reference: {_fmt_err(ref)}; verdict "
-                   f"{rel['verdict']}; wrote {out / (JOINT_RUN if joint else name)}")
-        if rel["verdict"] != "ok":
+                   f"{verdict}; wrote {out / (JOINT_RUN if joint else name)}")
+        if verdict != "ok":
             unreliable.append(name)
 
     try:
@@ -420,10 +422,10 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
         raise typer.Exit(130) from None
     ref = result.reference_error
     typer.echo(f"paretocal: {len(result.frames)} frames, {result.evaluations} evaluations in "
-               f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision['rule']}), "
+               f"{result.wall_s:.1f} s; chosen n = {result.n_points} ({result.decision.rule}), "
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval modelled "
-               f"({result.decision['measured_ms']:.4g} measured now); "
+               f"({result.decision.measured_ms:.4g} measured now); "
                f"error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
     from .verdict import interval_text
@@ -437,7 +439,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     if intervals:
         typer.echo(f"paretocal: 95 % intervals per axis (LiDAR frame): {intervals}")
     typer.echo(verdict_line(rel))
-    if strict and rel["verdict"] != "ok":
+    if strict and not rel.ok:
         raise typer.Exit(STRICT_EXIT)
 
 
@@ -463,7 +465,7 @@ def interrupted_line(exc, out: Path) -> str:
 STRICT_EXIT = 3
 
 
-def verdict_line(reliability: dict) -> str:
+def verdict_line(reliability: Reliability) -> str:
     """The CLI's last line: the verdict and its main reason, for a person."""
     from .verdict import verdict_text
 
@@ -576,17 +578,16 @@ def check(
                                  "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
     with _Progress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
-    r["extrinsic_from"] = str(extrinsic) if extrinsic is not None else "dataset"
+    r = r.with_source(str(extrinsic) if extrinsic is not None else "dataset")
     if out is not None:
-        atomic_write_text(out, json.dumps(r, indent=2) + "\n")
-    m = r["moved"]
+        atomic_write_text(out, json.dumps(r.to_dict(), indent=2) + "\n")
     which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
-    typer.echo(f"paretocal: {which}: {r['verdict'].upper()} (score {r['score']:.2f}; the local "
-               f"optimum is {m['rotation_deg']:.3f} deg / {m['translation_cm']:.2f} cm / "
-               f"{m['pixels']:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
-               f"{100 * r['neighbour_fraction']:.1f} % of grid neighbours score better)")
-    typer.echo(f"paretocal: {_features_line(r['features'])}")
-    for note in r["notes"]:
+    typer.echo(f"paretocal: {which}: {r.verdict.upper()} (score {r.score:.2f}; the local "
+               f"optimum is {r.moved_deg:.3f} deg / {100 * r.moved_m:.2f} cm / "
+               f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
+    typer.echo(f"paretocal: {_features_line(r.features)}")
+    for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
 
 

@@ -23,9 +23,123 @@
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from .errors import SettingsError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .search.basin import BasinTest
+
+
+@dataclass(frozen=True)
+class Decision:
+    """How the solution was chosen from the front (:func:`decide`), and what the run adds about
+    it (:meth:`with_run`).
+
+    Times are in milliseconds, the cost model's unit; deviations in pixels.
+
+    Attributes
+    ----------
+    rule : str
+        ``"knee"``, ``"knee-chamfer"``, ``"budget"`` or ``"min-chamfer"``.
+    deviation_px : float
+        The chosen solution's deviation from the best-supported one (px).
+    method : str or None
+        The knee rules' method (None for the others).
+    figure : str or None
+        What the ``knee`` rule reads (None for the others).
+    max_deviation_px : float or None
+        The ``knee`` rule's acceptance limit (px); None for the others.
+    budget_ms : float or None
+        The ``budget`` rule's budget (ms per evaluation); None for the others.
+    solutions_within_budget : int or None
+        Solutions of the front the budget admits (``budget`` only).
+    n_points : int or None
+        Points per frame of the chosen solution; this and the fields after it are set by the
+        pipeline (:meth:`with_run`), None for a bare :func:`decide`.
+    front_size : int or None
+        Solutions of the front.
+    polished : bool or None
+        Whether the front was polished.
+    best_supported_n : int or None
+        Points per frame of the best-supported solution (the lowest f1).
+    basin : BasinTest or None
+        The near/far basin test (:func:`paretocal.search.basin.prefer_near`), None when the
+        front was not polished.
+    measured_ms : float or None
+        The chosen solution's evaluation time measured at the end of the run (ms); the
+        modelled time decides.
+    """
+
+    rule: str
+    deviation_px: float
+    method: str | None = None
+    figure: str | None = None
+    max_deviation_px: float | None = None
+    budget_ms: float | None = None
+    solutions_within_budget: int | None = None
+    n_points: int | None = None
+    front_size: int | None = None
+    polished: bool | None = None
+    best_supported_n: int | None = None
+    basin: "BasinTest | None" = None
+    measured_ms: float | None = None
+
+    def with_run(self, n_points: int, front_size: int, polished: bool, best_supported_n: int,
+               basin: "BasinTest | None", measured_ms: float) -> "Decision":
+        """The decision with what the run knows of the chosen solution and its front."""
+        return dataclasses.replace(self, n_points=int(n_points), front_size=int(front_size),
+                                   polished=bool(polished),
+                                   best_supported_n=int(best_supported_n), basin=basin,
+                                   measured_ms=float(measured_ms))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The decision as ``result.json`` writes it: the rule, what it used, then what the
+        run adds (from ``n_points`` on, when set)."""
+        out: dict[str, Any] = {"rule": self.rule}
+        if self.method is not None:
+            out["method"] = self.method
+        if self.budget_ms is not None:
+            out["budget_ms"] = float(self.budget_ms)
+            out["solutions_within_budget"] = self.solutions_within_budget
+        out["deviation_px"] = float(self.deviation_px)
+        if self.figure is not None:
+            out["figure"] = self.figure
+        if self.max_deviation_px is not None:
+            out["max_deviation_px"] = float(self.max_deviation_px)
+        if self.n_points is not None:
+            out.update(n_points=self.n_points, front_size=self.front_size,
+                       polished=self.polished, best_supported_n=self.best_supported_n,
+                       basin=None if self.basin is None else self.basin.to_dict())
+        if self.measured_ms is not None:
+            out["measured_ms"] = float(self.measured_ms)
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Decision":
+        """The decision read back from its :meth:`to_dict` form (``result.json``'s
+        ``decision``); a figure it lacks reads as None (NaN for ``deviation_px``)."""
+        from .search.basin import BasinTest
+
+        def opt(key, kind):
+            v = doc.get(key)
+            return None if v is None else kind(v)
+
+        return cls(rule=str(doc.get("rule", "")),
+                   deviation_px=float(doc.get("deviation_px", np.nan)),
+                   method=opt("method", str), figure=opt("figure", str),
+                   max_deviation_px=opt("max_deviation_px", float),
+                   budget_ms=opt("budget_ms", float),
+                   solutions_within_budget=opt("solutions_within_budget", int),
+                   n_points=opt("n_points", int), front_size=opt("front_size", int),
+                   polished=opt("polished", bool),
+                   best_supported_n=opt("best_supported_n", int),
+                   basin=opt("basin", BasinTest.from_dict),
+                   measured_ms=opt("measured_ms", float))
 
 
 def chord_distance(F: np.ndarray) -> np.ndarray:
@@ -113,7 +227,7 @@ def reprojection_deviation(T: np.ndarray, T_best: np.ndarray, points: list[np.nd
 
 
 def choose(F: np.ndarray, ms: np.ndarray, rule: str = "knee",
-           budget_ms: float | None = None) -> tuple[int, dict]:
+           budget_ms: float | None = None) -> tuple[int, Decision]:
     """Pick a solution of the front.
 
     Parameters
@@ -130,14 +244,15 @@ def choose(F: np.ndarray, ms: np.ndarray, rule: str = "knee",
     Returns
     -------
     index : int
-    decision : dict
-        The rule and what it used, for ``result.json``.
+    decision : Decision
+        The rule and what it used, ``deviation_px`` NaN (:func:`decide` sets it).
     """
     if rule in ("knee", "knee-chamfer"):
         i = knee_index(F)
-        return i, {"rule": rule, "method": "max distance below the chord (normalised)"}
+        return i, Decision(rule=rule, deviation_px=np.nan,
+                           method="max distance below the chord (normalised)")
     if rule == "min-chamfer":
-        return int(np.argmin(F[:, 0])), {"rule": "min-chamfer"}
+        return int(np.argmin(F[:, 0])), Decision(rule="min-chamfer", deviation_px=np.nan)
     if rule == "budget":
         if budget_ms is None:
             raise SettingsError("--budget-ms is required by the budget rule")
@@ -146,8 +261,8 @@ def choose(F: np.ndarray, ms: np.ndarray, rule: str = "knee",
             raise SettingsError(f"--budget-ms {budget_ms:g}: no solution of the front fits; the "
                                 f"cheapest needs {float(np.min(ms)):.4g} ms")
         i = int(ok[np.argmin(F[ok, 0])])
-        return i, {"rule": "budget", "budget_ms": float(budget_ms),
-                   "solutions_within_budget": int(len(ok))}
+        return i, Decision(rule="budget", deviation_px=np.nan, budget_ms=float(budget_ms),
+                           solutions_within_budget=int(len(ok)))
     raise SettingsError(f"unknown decision rule {rule!r}")
 
 
@@ -176,7 +291,8 @@ def knee_candidates(F: np.ndarray, deviation: np.ndarray,
 
 
 def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "knee",
-           budget_ms: float | None = None, max_deviation_px: float = 1.0) -> tuple[int, dict]:
+           budget_ms: float | None = None, max_deviation_px: float = 1.0
+           ) -> tuple[int, Decision]:
     """Choose a solution of the front by ``rule`` (see the module docstring).
 
     Parameters
@@ -193,7 +309,8 @@ def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "kn
     Returns
     -------
     index : int
-    decision : dict
+    decision : Decision
+        The rule, what it used and the chosen solution's deviation.
     """
     if rule == "knee":
         candidates, Fd = knee_candidates(F, deviation, max_deviation_px)
@@ -201,8 +318,8 @@ def decide(F: np.ndarray, ms: np.ndarray, deviation: np.ndarray, rule: str = "kn
         Fd, candidates = F, np.arange(len(F))
     j, decision = choose(Fd[candidates], ms[candidates], rule, budget_ms)
     i = int(candidates[j])
-    decision["deviation_px"] = float(deviation[i])
+    decision = dataclasses.replace(decision, deviation_px=float(deviation[i]))
     if rule == "knee":
-        decision["figure"] = "log10(deviation_px + 0.1) vs cost"
-        decision["max_deviation_px"] = float(max_deviation_px)
+        decision = dataclasses.replace(decision, figure="log10(deviation_px + 0.1) vs cost",
+                                       max_deviation_px=float(max_deviation_px))
     return i, decision

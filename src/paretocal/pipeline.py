@@ -144,13 +144,13 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             d = settings.decision
             i, decision = decide(F, costs["ms"], columns["deviation_px"], d.rule, d.budget_ms,
                                  d.max_deviation_px)
-            decision.update({"n_points": int(round(X[i, 6])), "front_size": int(len(X)),
-                             "polished": bool(d.polish),
-                             "best_supported_n": int(round(X[best, 6])), "basin": basin})
+            n_points = int(round(X[i, 6]))
             # The model decides (reproducibly); the time measured now is reported beside it.
-            decision["measured_ms"] = time_per_candidate(
-                stage.scene, get_evaluator(settings.objective.evaluator), T[i],
-                decision["n_points"])
+            decision = decision.with_run(
+                n_points=n_points, front_size=len(X), polished=d.polish,
+                best_supported_n=int(round(X[best, 6])), basin=basin,
+                measured_ms=time_per_candidate(
+                    stage.scene, get_evaluator(settings.objective.evaluator), T[i], n_points))
             quality = quality_report(stage.objective, X[i],
                                      pixel_fd_step(stage.objective, at_every_point(
                                          stage.objective, X[i])))
@@ -176,8 +176,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
         wide=None if wide is None else wide.to_dict())
     result.reliability = reliability(result)
-    if result.reliability["verdict"] != "ok":
-        log.warning("the result may be unreliable: %s", "; ".join(result.reliability["reasons"]))
+    if not result.reliability.ok:
+        log.warning("the result may be unreliable: %s", "; ".join(result.reliability.reasons))
     return result
 
 

@@ -33,6 +33,15 @@ AXES = ("x", "y", "z", "yaw", "pitch", "roll")
 UNITS = ("cm", "cm", "cm", "deg", "deg", "deg")
 TO_REPORT = np.array([100.0, 100.0, 100.0, 1.0, 1.0, 1.0])   # m -> cm for display
 
+
+def cm_written(m: float, digits: int) -> float:
+    """A length ``m`` (metres) in centimetres rounded to ``digits``, as result.json writes it.
+
+    A record holding a figure result.json writes in cm rounded to ``digits`` holds that
+    figure / 100; this gives the written figure back exactly (``m * 100`` alone can miss it
+    in the last bit, and rounding again to the same digits recovers it)."""
+    return round(float(m) * 100.0, digits)
+
 #: Finite-difference step of the run's quality report, in pixels: each axis is stepped by the
 #: change that moves the projected feature points by this much on average. The objective reads
 #: distance transforms of pixel-quantised edges, so differences over steps of about a pixel
@@ -295,6 +304,6 @@ def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
     return correction_params(invert(T_from) @ T_to)
 
 
-__all__ = ["AXES", "at_every_point", "axis_resolution", "correction_between", "correction_matrix",
-           "displacement_px", "local_optimum", "neighbour_fraction", "pixel_fd_step",
+__all__ = ["AXES", "at_every_point", "axis_resolution", "cm_written", "correction_between",
+           "correction_matrix", "displacement_px", "local_optimum", "neighbour_fraction", "pixel_fd_step",
            "quality_report"]

@@ -9,12 +9,13 @@ import numpy as np
 
 from . import __version__
 from .config import Settings
+from .decide import Decision
 from .geometry import pose_error
 from .objective import CalibrationObjective
 from .objective.cost import CostModel
 from .quality import Quality
 from .search import VARIABLES
-from .verdict import reliability
+from .verdict import Evidence, Reliability, reliability
 
 
 @dataclass
@@ -49,7 +50,7 @@ class CalibrationResult:
     T_ref: np.ndarray | None
     chosen: int
     front: Front
-    decision: dict
+    decision: Decision
     cost_model: CostModel
     settings: Settings
     evaluations: int
@@ -62,15 +63,16 @@ class CalibrationResult:
     nsga_front: tuple | None = None
     #: The quality report at the result (metres and degrees; ``result.json`` writes it in cm).
     quality: Quality | None = None
-    #: ``{"verdict": "ok" | "unreliable", "reasons": [...], ...}`` (see :func:`reliability`).
-    reliability: dict | None = None
+    #: The verdict: ``"ok"`` or ``"unreliable"``, the reasons, the evidence (see
+    #: :func:`reliability`).
+    reliability: Reliability | None = None
     #: What was done about motion during the sweeps (see :func:`compensate_motion`).
     motion: dict | None = None
     #: What the input files offered: the point fields used, the camera model, notes.
     inputs: dict | None = None
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
     #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
-    evidence: dict | None = None
+    evidence: Evidence | None = None
     #: What the wide start did (:meth:`paretocal.wide.WideStart.to_dict`), None when the
     #: stated error did not ask for it. When it applied, ``T_init`` is the start it found and
     #: the settings hold the narrower stated error the calibration used from there.
@@ -125,7 +127,7 @@ class CalibrationResult:
             "correction_frame": "lidar",
             "n_points": self.n_points,
             "objectives": self.objectives(),
-            "decision": self.decision,
+            "decision": self.decision.to_dict(),
             "reference_error": self.reference_error,
             "initial_error": self.initial_error,
             "evaluations": int(self.evaluations),
@@ -144,6 +146,6 @@ class CalibrationResult:
             "motion": self.motion,
             "inputs": self.inputs,
             "wide_start": self.wide,
-            "reliability": self.reliability if self.reliability is not None
-            else reliability(self),
+            "reliability": (self.reliability if self.reliability is not None
+                            else reliability(self)).to_dict(),
         }

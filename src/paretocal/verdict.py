@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,7 +39,7 @@ from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
 from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
-from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution,
+from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution, cm_written,
                       displacement_px, local_optimum, pixel_fd_step, quality_report)
 from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
 
@@ -92,8 +92,561 @@ CONTRAST_MIN_FRAMES_CLEAR = 0.5
 Z95 = 1.959964
 
 
+# --- the evidence as typed records ----------------------------------------------------------
+# Each record holds the figures result.json writes, in metres and degrees: a figure written in
+# cm, rounded to k decimals, is held as that rounded figure / 100, and written back by
+# cm_written (rounding again to k decimals recovers the written figure exactly).
+
+def _cm_or_none(m: float, digits: int) -> float | None:
+    """:func:`~paretocal.quality.cm_written`, None where not finite."""
+    return cm_written(m, digits) if np.isfinite(m) else None
+
+
+def _rounded_si(v_report, digits: int) -> np.ndarray:
+    """Per-axis figures in report units (cm and deg) rounded to ``digits``, in m and deg (6,);
+    NaN where not finite."""
+    v = np.asarray(v_report, dtype=np.float64)
+    return np.array([round(float(x), digits) if np.isfinite(x) else np.nan for x in v]) / TO_REPORT
+
+
+def _per_axis(v_si: np.ndarray, digits: int) -> dict[str, float | None]:
+    """Per-axis figures (6,) in m and deg by axis name in report units (cm and deg), rounded
+    to ``digits``; None where not finite."""
+    return {a: round(float(x * f), digits) if np.isfinite(x) else None
+            for a, x, f in zip(AXES, np.asarray(v_si, dtype=np.float64), TO_REPORT)}
+
+
+def _axes_si(doc: dict | None) -> np.ndarray:
+    """Per-axis figures by name in report units (a key missing or None: NaN) in m and deg."""
+    doc = doc or {}
+    return np.array([np.nan if doc.get(a) is None else float(doc[a]) for a in AXES]) / TO_REPORT
+
+
+def _or_none(v: float) -> float | None:
+    """``v`` as written: None where not finite."""
+    return float(v) if np.isfinite(v) else None
+
+
+def _nan(v) -> float:
+    """A figure read back: NaN for None."""
+    return np.nan if v is None else float(v)
+
+
+# A figure that is not finite (none measured, or one missing from a file read back) is written
+# null, never as JSON's invalid NaN.
+
+
+@dataclass(frozen=True)
+class RestartRun:
+    """One independent restart of the search and how it compares with the result
+    (:func:`restart_evidence`).
+
+    Attributes
+    ----------
+    separation_deg : float
+        Rotation between the restart's local optimum and the result's (deg, 4 decimals).
+    separation_m : float
+        Translation between them (m; written in cm, 3 decimals).
+    separation_px : float
+        Mean displacement of the feature points between them (px).
+    same_basin : bool
+        Within the truncation share of one another: one basin.
+    distinct : bool
+        Farther apart than a usable calibration allows.
+    mean_px : float
+        The frames' mean preference for the restart's optimum (px; positive: it fits better).
+    p_restart_better : float
+        One-sided p of that preference; NaN without one (one frame; written null).
+    frames_restart_better : int
+    frames : int
+    evaluations : int
+        The restart's evaluations.
+    correction : ndarray, shape (6,)
+        The restart's best solution (m, deg).
+    """
+
+    separation_deg: float
+    separation_m: float
+    separation_px: float
+    same_basin: bool
+    distinct: bool
+    mean_px: float
+    p_restart_better: float
+    frames_restart_better: int
+    frames: int
+    evaluations: int
+    correction: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (the separation in cm)."""
+        return {"separation_deg": _or_none(self.separation_deg),
+                "separation_cm": _cm_or_none(self.separation_m, 3),
+                "separation_px": _or_none(self.separation_px),
+                "same_basin": bool(self.same_basin), "distinct": bool(self.distinct),
+                "mean_px": _or_none(self.mean_px),
+                "p_restart_better": _or_none(self.p_restart_better),
+                "frames_restart_better": int(self.frames_restart_better),
+                "frames": int(self.frames), "evaluations": int(self.evaluations),
+                "correction": [_or_none(v) for v in self.correction]}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "RestartRun":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False)."""
+        return cls(separation_deg=_nan(doc.get("separation_deg")),
+                   separation_m=_nan(doc.get("separation_cm")) / 100.0,
+                   separation_px=_nan(doc.get("separation_px")),
+                   same_basin=bool(doc.get("same_basin", False)),
+                   distinct=bool(doc.get("distinct", False)), mean_px=_nan(doc.get("mean_px")),
+                   p_restart_better=_nan(doc.get("p_restart_better")),
+                   frames_restart_better=int(doc.get("frames_restart_better", 0)),
+                   frames=int(doc.get("frames", 0)), evaluations=int(doc.get("evaluations", 0)),
+                   correction=np.array(doc.get("correction") or [np.nan] * 6, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class RestartCheck:
+    """The independent restart(s) (:func:`restart_evidence`).
+
+    Attributes
+    ----------
+    runs : tuple of RestartRun
+    disagrees : bool
+        A distinct restart optimum the frames do not clearly reject.
+    evaluations : int
+        Evaluations of every restart.
+    result_optimum : ndarray, shape (7,), or None
+        The result's local optimum at every point (m, deg, n), which the other checks start
+        from; not written (None when read back).
+    """
+
+    runs: tuple[RestartRun, ...]
+    disagrees: bool
+    evaluations: int
+    result_optimum: np.ndarray | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (without ``result_optimum``)."""
+        return {"runs": [r.to_dict() for r in self.runs], "disagrees": bool(self.disagrees),
+                "evaluations": int(self.evaluations)}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "RestartCheck":
+        return cls(runs=tuple(RestartRun.from_dict(r) for r in doc.get("runs") or []),
+                   disagrees=bool(doc.get("disagrees", False)),
+                   evaluations=int(doc.get("evaluations", 0)))
+
+
+@dataclass(frozen=True)
+class Contrast:
+    """How clearly the frames prefer the result over random poses about it
+    (:func:`contrast_evidence`).
+
+    Attributes
+    ----------
+    poses : int
+        Random poses compared.
+    margin_px : float
+        The median random pose's objective minus the result's, mean over frames (px).
+    z : float
+        That margin over the random poses' spread.
+    frames_clear : float
+        Share of the frames whose objective at the result beats 95 % of the random poses.
+    beaten : float
+        Share of the (pose, frame) pairs the result beats.
+    group_ratio : ndarray, shape (G,)
+        Per feature group (:data:`~paretocal.features.lidar.GROUP_NAMES`), the result's mean
+        distance over the random poses' median (1 is chance); NaN where that median is not
+        positive (written null).
+    """
+
+    poses: int
+    margin_px: float
+    z: float
+    frames_clear: float
+    beaten: float
+    group_ratio: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (the group ratios by group name)."""
+        return {"poses": int(self.poses), "margin_px": _or_none(self.margin_px),
+                "z": _or_none(self.z), "frames_clear": _or_none(self.frames_clear),
+                "beaten": _or_none(self.beaten),
+                "group_ratio": {g: _or_none(v) for g, v in zip(GROUP_NAMES, self.group_ratio)}}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Contrast":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN."""
+        ratio = doc.get("group_ratio") or {}
+        return cls(poses=int(doc.get("poses", 0)), margin_px=_nan(doc.get("margin_px")),
+                   z=_nan(doc.get("z")), frames_clear=_nan(doc.get("frames_clear")),
+                   beaten=_nan(doc.get("beaten")),
+                   group_ratio=np.array([_nan(ratio.get(g)) for g in GROUP_NAMES]))
+
+
+@dataclass(frozen=True)
+class StartComparison:
+    """The initial extrinsic against the result, frame by frame (:func:`start_evidence`).
+
+    Attributes
+    ----------
+    separation_deg : float
+        Rotation from the start to the result (deg, 4 decimals).
+    separation_m : float
+        Translation from the start to the result (m; written in cm, 3 decimals).
+    mean_px : float
+        The start's mean advantage per frame (px; positive when it fits better).
+    frames : int
+    frames_start_better : int
+    p_start_better : float
+        One-sided p; NaN with one frame (written null).
+    result_clearly_better : bool
+        The frames prefer the result by at least one standard error of their paired
+        differences.
+    """
+
+    separation_deg: float
+    separation_m: float
+    mean_px: float
+    frames: int
+    frames_start_better: int
+    p_start_better: float
+    result_clearly_better: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (the separation in cm)."""
+        return {"separation_deg": _or_none(self.separation_deg),
+                "separation_cm": _cm_or_none(self.separation_m, 3),
+                "mean_px": _or_none(self.mean_px),
+                "frames": int(self.frames), "frames_start_better": int(self.frames_start_better),
+                "p_start_better": _or_none(self.p_start_better),
+                "result_clearly_better": bool(self.result_clearly_better)}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "StartComparison":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False)."""
+        return cls(separation_deg=_nan(doc.get("separation_deg")),
+                   separation_m=_nan(doc.get("separation_cm")) / 100.0,
+                   mean_px=_nan(doc.get("mean_px")), frames=int(doc.get("frames", 0)),
+                   frames_start_better=int(doc.get("frames_start_better", 0)),
+                   p_start_better=_nan(doc.get("p_start_better")),
+                   result_clearly_better=bool(doc.get("result_clearly_better", False)))
+
+
+@dataclass(frozen=True)
+class CameraCheck:
+    """One camera of a joint calibration polished alone (:func:`camera_evidence`); the
+    figures after ``checked`` are NaN (``agrees`` None) for a camera not checked.
+
+    Attributes
+    ----------
+    name : str
+    frames : int
+        The camera's frames.
+    checked : bool
+        Whether it had frames enough to be checked.
+    own_optimum_px : float
+        How far its own optimum moves its feature points in its images (px).
+    tolerance_px : float
+        The bias its edges can be trusted to (px).
+    agrees : bool or None
+        ``own_optimum_px <= tolerance_px``.
+    separation_deg : float
+        Rotation from the result to its own optimum (deg, 4 decimals).
+    separation_m : float
+        Translation from the result to its own optimum (m; written in cm, 3 decimals).
+    d : ndarray, shape (6,)
+        The correction from the result to its own optimum, LiDAR frame (m, deg; written in cm
+        and deg, 4 decimals).
+    """
+
+    name: str
+    frames: int
+    checked: bool
+    own_optimum_px: float = np.nan
+    tolerance_px: float = np.nan
+    agrees: bool | None = None
+    separation_deg: float = np.nan
+    separation_m: float = np.nan
+    d: np.ndarray = dataclasses.field(default_factory=lambda: np.full(6, np.nan))
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it: the figures after ``checked`` only when checked."""
+        out: dict[str, Any] = {"name": self.name, "frames": int(self.frames),
+                               "checked": bool(self.checked)}
+        if self.checked:
+            out.update(own_optimum_px=_or_none(self.own_optimum_px),
+                       tolerance_px=_or_none(self.tolerance_px), agrees=bool(self.agrees),
+                       separation_deg=_or_none(self.separation_deg),
+                       separation_cm=_cm_or_none(self.separation_m, 3), d=_per_axis(self.d, 4))
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "CameraCheck":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN."""
+        agrees = doc.get("agrees")
+        return cls(name=str(doc.get("name", "")), frames=int(doc.get("frames", 0)),
+                   checked=bool(doc.get("checked", False)),
+                   own_optimum_px=_nan(doc.get("own_optimum_px")),
+                   tolerance_px=_nan(doc.get("tolerance_px")),
+                   agrees=None if agrees is None else bool(agrees),
+                   separation_deg=_nan(doc.get("separation_deg")),
+                   separation_m=_nan(doc.get("separation_cm")) / 100.0, d=_axes_si(doc.get("d")))
+
+
+@dataclass(frozen=True)
+class CameraAgreement:
+    """Whether the cameras of a joint calibration agree (:func:`camera_evidence`).
+
+    Attributes
+    ----------
+    cameras : tuple of CameraCheck
+    disagreeing : tuple of str
+        The names of the cameras checked that do not agree.
+    """
+
+    cameras: tuple[CameraCheck, ...]
+    disagreeing: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"cameras": [c.to_dict() for c in self.cameras],
+                "disagreeing": list(self.disagreeing)}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "CameraAgreement":
+        return cls(cameras=tuple(CameraCheck.from_dict(c) for c in doc.get("cameras") or []),
+                   disagreeing=tuple(str(n) for n in doc.get("disagreeing") or []))
+
+
+@dataclass(frozen=True)
+class Intervals:
+    """Per-axis 95 % intervals of the correction (:func:`intervals`), on the correction's
+    axes ``x, y, z, yaw, pitch, roll`` (the LiDAR frame; m and deg). Every per-axis figure
+    is held as ``result.json`` writes it, rounded in cm and deg (``jackknife_se``,
+    ``per_px``, ``bias`` and ``resolution_per_px`` to 5 decimals, ``half_width`` to 4), and
+    is NaN where it is not finite (written null).
+
+    Attributes
+    ----------
+    jackknife_se : ndarray, shape (6,)
+        The frames' jackknife standard errors as used (m, deg).
+    half_width : ndarray, shape (6,)
+        The intervals' half-widths (m, deg); NaN where the axis is not determined.
+    determined : ndarray, shape (6,), bool
+        Whether the data determine each axis.
+    alignment_px : float
+        The image alignment the result reached (px, 4 decimals); NaN when no edge matched.
+    sampling_px : ndarray, shape (2,), or None
+        The LiDAR's sampling step in the image along u and v (px, 3 decimals).
+    per_px : ndarray, shape (6,)
+        Largest change of each axis per pixel rms, the others free (m, deg per px).
+    bias : ndarray, shape (6,)
+        The bound of a bias the frames share (m, deg).
+    resolution_per_px : ndarray, shape (6,), or None
+        Change of each axis alone per pixel (m, deg per px).
+    """
+
+    jackknife_se: np.ndarray
+    half_width: np.ndarray
+    determined: np.ndarray
+    alignment_px: float
+    sampling_px: np.ndarray | None
+    per_px: np.ndarray
+    bias: np.ndarray
+    resolution_per_px: np.ndarray | None = None
+
+    @property
+    def undetermined(self) -> tuple[str, ...]:
+        """The names of the axes the data do not determine."""
+        return tuple(a for a, k in zip(AXES, self.determined) if not k)
+
+    def half_width_report(self) -> dict[str, float | None]:
+        """The half-widths by axis name in cm and deg, as written (None: not determined)."""
+        return _per_axis(self.half_width, 4)
+
+    def jackknife_se_report(self) -> dict[str, float | None]:
+        """The jackknife standard errors by axis name in cm and deg, as written."""
+        return _per_axis(self.jackknife_se, 5)
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it: ``frame`` ``"lidar"``, ``units``, the per-axis
+        figures by axis name in cm and deg, ``undetermined`` (list of axis names)."""
+        out: dict[str, Any] = {
+            "frame": "lidar", "units": dict(zip(AXES, UNITS)),
+            "jackknife_se": self.jackknife_se_report(),
+            "half_width": self.half_width_report(),
+            "determined": {a: bool(k) for a, k in zip(AXES, self.determined)},
+            "undetermined": list(self.undetermined),
+            "alignment_px": _or_none(self.alignment_px),
+            "sampling_px": (None if self.sampling_px is None
+                            else [_or_none(v) for v in self.sampling_px]),
+            "per_px": _per_axis(self.per_px, 5), "bias": _per_axis(self.bias, 5)}
+        if self.resolution_per_px is not None:
+            out["resolution_per_px"] = _per_axis(self.resolution_per_px, 5)
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Intervals":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN, an axis
+        without ``determined`` as determined unless ``undetermined`` names it."""
+        undetermined = set(doc.get("undetermined") or [])
+        det = doc.get("determined") or {}
+        samp, res = doc.get("sampling_px"), doc.get("resolution_per_px")
+        return cls(jackknife_se=_axes_si(doc.get("jackknife_se")),
+                   half_width=_axes_si(doc.get("half_width")),
+                   determined=np.array([bool(det.get(a, a not in undetermined)) for a in AXES]),
+                   alignment_px=_nan(doc.get("alignment_px")),
+                   sampling_px=None if samp is None else np.array([_nan(v) for v in samp]),
+                   per_px=_axes_si(doc.get("per_px")), bias=_axes_si(doc.get("bias")),
+                   resolution_per_px=None if res is None else _axes_si(res))
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the verdict checks beyond the run itself (:func:`gather_evidence`); a part not
+    gathered is None.
+
+    Attributes
+    ----------
+    contrast : Contrast or None
+        Image-cloud agreement (:func:`contrast_evidence`).
+    start : StartComparison or None
+        The initial extrinsic against the result (:func:`start_evidence`).
+    intervals : Intervals or None
+        Per-axis 95 % intervals (:func:`intervals`).
+    restart : RestartCheck or None
+        The independent restart(s) (:func:`restart_evidence`); None when switched off.
+    cameras : CameraAgreement or None
+        The cameras' agreement (:func:`camera_evidence`), a joint calibration only.
+    """
+
+    contrast: Contrast | None = None
+    start: StartComparison | None = None
+    intervals: Intervals | None = None
+    restart: RestartCheck | None = None
+    cameras: CameraAgreement | None = None
+
+    def to_dict(self, intervals: bool = True) -> dict[str, Any]:
+        """As ``result.json`` writes it, the parts gathered by name (``intervals`` False:
+        without the intervals, as the verdict's ``evidence`` writes it)."""
+        parts = {"contrast": self.contrast, "start": self.start,
+                 "intervals": self.intervals if intervals else None,
+                 "restart": self.restart, "cameras": self.cameras}
+        return {k: v.to_dict() for k, v in parts.items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Evidence":
+        """Read back from :meth:`to_dict`'s form (a part it lacks: None)."""
+        def part(key, kind):
+            v = doc.get(key)
+            return None if v is None else kind.from_dict(v)
+
+        return cls(contrast=part("contrast", Contrast), start=part("start", StartComparison),
+                   intervals=part("intervals", Intervals),
+                   restart=part("restart", RestartCheck),
+                   cameras=part("cameras", CameraAgreement))
+
+
+@dataclass(frozen=True)
+class Reliability:
+    """The verdict on a result (:func:`reliability`): whether to trust it, why not, and what
+    it was judged from.
+
+    Attributes
+    ----------
+    verdict : str
+        ``"ok"`` or ``"unreliable"``.
+    reasons : tuple of str
+        What made it unreliable, for a person; empty when ok.
+    evidence : Evidence or None
+        The verdict's own checks (:func:`gather_evidence`), None without them; its intervals
+        are :attr:`intervals` for a result judged ok, :attr:`intervals_not_trusted` else.
+    frames : int
+        Frames of the run.
+    in_view : float
+        Share of the feature points in view at the chosen extrinsic (4 decimals); NaN when
+        not known (written null).
+    at_bound : tuple of str
+        The axes on which the correction sits at a search bound.
+    max_jackknife_se_deg : float
+        The largest rotation jackknife standard error the verdict read (deg, 4 decimals);
+        NaN without one (written null).
+    max_jackknife_se_m : float
+        The largest translation jackknife standard error the verdict read (m; written in cm,
+        3 decimals); NaN without one.
+    """
+
+    verdict: str
+    reasons: tuple[str, ...] = ()
+    evidence: Evidence | None = None
+    frames: int = 0
+    in_view: float = np.nan
+    at_bound: tuple[str, ...] = ()
+    max_jackknife_se_deg: float = np.nan
+    max_jackknife_se_m: float = np.nan
+
+    @property
+    def ok(self) -> bool:
+        """Whether the result is judged ok."""
+        return self.verdict == "ok"
+
+    @property
+    def intervals(self) -> Intervals | None:
+        """The per-axis 95 % intervals, only for a result judged ok: the errors that make a
+        result unreliable are ones the intervals do not measure."""
+        return None if self.reasons or self.evidence is None else self.evidence.intervals
+
+    @property
+    def intervals_not_trusted(self) -> Intervals | None:
+        """The intervals of a result judged unreliable (not what they claim)."""
+        return None if not self.reasons or self.evidence is None else self.evidence.intervals
+
+    @property
+    def start(self) -> StartComparison | None:
+        """How the initial extrinsic compares, for a result judged unreliable (keep the
+        start?); None for one judged ok."""
+        return None if not self.reasons or self.evidence is None else self.evidence.start
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (``reliability``): the intervals under ``intervals``
+        or ``intervals_not_trusted``, the rest of the evidence under ``evidence``."""
+        def written(part):
+            return None if part is None else part.to_dict()
+
+        ev = None if self.evidence is None else self.evidence.to_dict(intervals=False)
+        return {
+            "verdict": self.verdict,
+            "reasons": list(self.reasons),
+            "intervals": written(self.intervals),
+            "intervals_not_trusted": written(self.intervals_not_trusted),
+            "evidence": ev or None,
+            "start": written(self.start),
+            "frames": int(self.frames),
+            "in_view": _or_none(self.in_view),
+            "at_bound": list(self.at_bound),
+            "max_jackknife_se_deg": _or_none(self.max_jackknife_se_deg),
+            "max_jackknife_se_cm": _cm_or_none(self.max_jackknife_se_m, 3),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "Reliability":
+        """Read back from :meth:`to_dict`'s form (``result.json``'s ``reliability``)."""
+        iv = doc.get("intervals") or doc.get("intervals_not_trusted")
+        parts = dict(doc.get("evidence") or {})
+        if iv is not None:
+            parts["intervals"] = iv
+        if doc.get("start") is not None:
+            parts.setdefault("start", doc["start"])
+        return cls(verdict=str(doc.get("verdict", "")),
+                   reasons=tuple(str(r) for r in doc.get("reasons") or []),
+                   evidence=Evidence.from_dict(parts) if parts else None,
+                   frames=int(doc.get("frames", 0)), in_view=_nan(doc.get("in_view")),
+                   at_bound=tuple(str(a) for a in doc.get("at_bound") or []),
+                   max_jackknife_se_deg=_nan(doc.get("max_jackknife_se_deg")),
+                   max_jackknife_se_m=_nan(doc.get("max_jackknife_se_cm")) / 100.0)
+
+
 def restart_evidence(objective, search: SearchSettings, decision: DecisionSettings, n_min: int,
-                     n_max: int, x: np.ndarray, x_opt: np.ndarray | None = None) -> dict:
+                     n_max: int, x: np.ndarray, x_opt: np.ndarray | None = None) -> RestartCheck:
     """An independent restart and how it compares with the result.
 
     Parameters
@@ -113,13 +666,11 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
 
     Returns
     -------
-    dict
-        ``runs`` (list, per restart: ``separation_deg``, ``separation_cm``, ``separation_px``,
-        ``same_basin``, ``distinct`` (farther apart than a usable calibration allows), the
-        paired comparison ``mean_px`` (positive: the restart fits better), ``p_restart_better``
-        (one-sided), ``frames_restart_better``, ``evaluations``), ``disagrees`` (a distinct
-        restart optimum the frames do not clearly reject), ``evaluations`` and
-        ``result_optimum`` (``x_opt``, or the one computed, (7,)).
+    RestartCheck
+        Per restart its separation from the result's optimum, whether it is distinct
+        (farther apart than a usable calibration allows), the paired comparison (positive
+        ``mean_px``: the restart fits better); ``disagrees`` (a distinct restart optimum the
+        frames do not clearly reject) and ``result_optimum`` (``x_opt``, or the one computed).
     """
     found, spent = restart_searches(objective, search, decision, n_min, n_max)
     # The restarts' local optima (and the result's, when not given) in one batch.
@@ -136,22 +687,23 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
         distinct = bool(not same and (e["rotation_deg"] > USABLE_DEG
                                       or e["translation_cm"] > 100 * USABLE_M))
         cmp = paired_preference(objective, x_opt, y)
-        runs.append({"separation_deg": round(float(e["rotation_deg"]), 4),
-                     "separation_cm": round(float(e["translation_cm"]), 3),
-                     "separation_px": round(float(sep_px), 3), "same_basin": same,
-                     "distinct": distinct, "mean_px": round(cmp["mean_px"], 5),
-                     "p_restart_better": round(cmp["p"], 5) if np.isfinite(cmp["p"]) else None,
-                     "frames_restart_better": cmp["frames_far_better"], "frames": cmp["frames"],
-                     "evaluations": ev, "correction": [float(v) for v in y[:6]]})
+        runs.append(RestartRun(
+            separation_deg=round(float(e["rotation_deg"]), 4),
+            separation_m=round(float(e["translation_cm"]), 3) / 100.0,
+            separation_px=round(float(sep_px), 3), same_basin=same, distinct=distinct,
+            mean_px=round(cmp["mean_px"], 5),
+            p_restart_better=round(cmp["p"], 5) if np.isfinite(cmp["p"]) else np.nan,
+            frames_restart_better=cmp["frames_far_better"], frames=cmp["frames"],
+            evaluations=ev, correction=np.array(y[:6], dtype=np.float64)))
         evaluations += ev
 
-    def doubt(run):
+    def doubt(run: RestartRun) -> bool:
         # A distinct optimum is dismissed only when the frames clearly prefer the result.
-        p = run["p_restart_better"]
-        worse = p is not None and (1.0 - p) < RESTART_P
-        return run["distinct"] and not worse
-    return {"runs": runs, "disagrees": bool(any(doubt(r) for r in runs)),
-            "evaluations": evaluations, "result_optimum": x_opt}
+        p = run.p_restart_better
+        worse = bool(np.isfinite(p) and (1.0 - p) < RESTART_P)
+        return run.distinct and not worse
+    return RestartCheck(runs=tuple(runs), disagrees=bool(any(doubt(r) for r in runs)),
+                        evaluations=evaluations, result_optimum=x_opt)
 
 
 def restart_searches(objective, search: SearchSettings, decision: DecisionSettings,
@@ -175,7 +727,7 @@ def restart_searches(objective, search: SearchSettings, decision: DecisionSettin
 
 
 def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, poses: int = CONTRAST_POSES,
-                      rng: np.random.Generator | int | None = None) -> dict:
+                      rng: np.random.Generator | int | None = None) -> Contrast:
     """How clearly the frames prefer the result over random poses about it.
 
     Parameters
@@ -191,12 +743,12 @@ def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, pose
 
     Returns
     -------
-    dict
-        ``poses``; ``margin_px`` (median random pose's objective minus the result's, mean over
-        frames); ``z`` (that margin over the random poses' spread); ``frames_clear`` (share of
-        frames whose objective at the result beats 95 % of the random poses); ``beaten``
-        (share of (pose, frame) pairs the result beats); ``group_ratio`` (per feature group,
-        the result's mean distance over the random poses' median: 1 is chance).
+    Contrast
+        ``margin_px`` (median random pose's objective minus the result's, mean over frames);
+        ``z`` (that margin over the random poses' spread); ``frames_clear`` (share of frames
+        whose objective at the result beats 95 % of the random poses); ``beaten`` (share of
+        (pose, frame) pairs the result beats); ``group_ratio`` (per feature group, the
+        result's mean distance over the random poses' median: 1 is chance).
     """
     s = search
     rng = np.random.default_rng(s.seed if rng is None else rng)
@@ -210,17 +762,18 @@ def contrast_evidence(objective, search: SearchSettings, x_opt: np.ndarray, pose
     means = fr.mean(axis=1)
     spread = float(np.std(means)) or float("nan")
     beaten = (fr > f0[None, :])
-    return {"poses": int(poses),
-            "margin_px": round(float(np.median(means) - f0.mean()), 4),
-            "z": round(float((np.median(means) - f0.mean()) / spread), 3),
-            "frames_clear": round(float((beaten.mean(axis=0) >= 0.95).mean()), 4),
-            "beaten": round(float(beaten.mean()), 4),
-            "group_ratio": {g: round(float(groups[0, i] / np.median(groups[1:, i])), 4)
-                            if np.median(groups[1:, i]) > 0 else None
-                            for i, g in enumerate(GROUP_NAMES)}}
+    return Contrast(poses=int(poses),
+                    margin_px=round(float(np.median(means) - f0.mean()), 4),
+                    z=round(float((np.median(means) - f0.mean()) / spread), 3),
+                    frames_clear=round(float((beaten.mean(axis=0) >= 0.95).mean()), 4),
+                    beaten=round(float(beaten.mean()), 4),
+                    group_ratio=np.array([
+                        round(float(groups[0, i] / np.median(groups[1:, i])), 4)
+                        if np.median(groups[1:, i]) > 0 else np.nan
+                        for i in range(len(GROUP_NAMES))]))
 
 
-def start_evidence(objective, x_opt: np.ndarray) -> dict:
+def start_evidence(objective, x_opt: np.ndarray) -> StartComparison:
     """The initial extrinsic against the result, frame by frame (the paired test of the
     restart check), so that a user can tell whether to keep their start when the result is
     not trusted.
@@ -234,12 +787,12 @@ def start_evidence(objective, x_opt: np.ndarray) -> dict:
 
     Returns
     -------
-    dict
-        ``separation_deg`` and ``separation_cm`` (the result from the start), ``mean_px``
-        (the start's mean advantage per frame, positive when it fits better), ``frames`` and
-        ``frames_start_better``, ``p_start_better`` (one-sided; None with one frame) and
-        ``result_clearly_better``: the frames prefer the result by at least one standard error
-        of their paired differences (:data:`RESTART_P`).
+    StartComparison
+        The separation of the result from the start, ``mean_px`` (the start's mean advantage
+        per frame, positive when it fits better), ``frames`` and ``frames_start_better``,
+        ``p_start_better`` (one-sided; NaN with one frame) and ``result_clearly_better``: the
+        frames prefer the result by at least one standard error of their paired differences
+        (:data:`RESTART_P`).
     """
     x0 = at_every_point(objective, np.zeros(7))
     x_opt = at_every_point(objective, x_opt)
@@ -249,25 +802,25 @@ def start_evidence(objective, x_opt: np.ndarray) -> dict:
     p = cmp["p"] if np.isfinite(cmp["p"]) else None
     # One frame gives no spread to judge by: never "clearly".
     clearly = bool(cmp["mean_px"] < 0 and p is not None and (1.0 - p) < RESTART_P)
-    return {"separation_deg": round(float(e["rotation_deg"]), 4),
-            "separation_cm": round(float(e["translation_cm"]), 3),
-            "mean_px": round(float(cmp["mean_px"]), 5), "frames": cmp["frames"],
-            "frames_start_better": cmp["frames_far_better"],
-            "p_start_better": None if p is None else round(float(p), 5),
-            "result_clearly_better": clearly}
+    return StartComparison(separation_deg=round(float(e["rotation_deg"]), 4),
+                           separation_m=round(float(e["translation_cm"]), 3) / 100.0,
+                           mean_px=round(float(cmp["mean_px"]), 5), frames=cmp["frames"],
+                           frames_start_better=cmp["frames_far_better"],
+                           p_start_better=np.nan if p is None else round(float(p), 5),
+                           result_clearly_better=clearly)
 
 
-def start_text(start: dict) -> str:
+def start_text(start: StartComparison) -> str:
     """How the initial extrinsic compares with a result that is not trusted, in words for the
     verdict line (``start`` from :func:`start_evidence`)."""
-    k, n = start["frames_start_better"], start["frames"]
-    if start["result_clearly_better"]:
+    k, n = start.frames_start_better, start.frames
+    if start.result_clearly_better:
         return (f"the frames do prefer the result to the initial extrinsic ({n - k} of {n} "
-                f"frames, {-start['mean_px']:.2g} px closer to the edges on average), but "
+                f"frames, {-start.mean_px:.2g} px closer to the edges on average), but "
                 "it may still be wrong")
     return (f"the frames do not clearly prefer the result to the initial extrinsic ({k} of {n} "
-            f"frames fit the start better; the result is {start['separation_deg']:.2g} deg / "
-            f"{start['separation_cm']:.2g} cm from it): keep the initial extrinsic until a "
+            f"frames fit the start better; the result is {start.separation_deg:.2g} deg / "
+            f"{cm_written(start.separation_m, 3):.2g} cm from it): keep the initial extrinsic until a "
             "calibration is judged ok")
 
 
@@ -333,7 +886,7 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
     return np.sqrt(var)
 
 
-def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
+def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> CameraAgreement:
     """Whether the cameras of a joint calibration agree (module docstring).
 
     Each camera's frames alone are polished from the result's local optimum ``x_opt`` (7,)
@@ -354,12 +907,11 @@ def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
 
     Returns
     -------
-    dict
-        ``cameras``: per camera ``name``, ``frames``, ``checked``, and when checked
-        ``own_optimum_px`` (the displacement), ``tolerance_px``, ``agrees``,
-        ``separation_deg`` / ``separation_cm`` and the correction ``d`` (LiDAR frame, cm and
-        deg) from the result to the camera's own optimum; ``disagreeing``: the names of those
-        that do not agree.
+    CameraAgreement
+        ``cameras``: per camera its name, frames, whether it was checked, and when checked
+        ``own_optimum_px`` (the displacement), ``tolerance_px``, ``agrees``, the separation
+        and the correction ``d`` (LiDAR frame, m and deg) from the result to the camera's own
+        optimum; ``disagreeing``: the names of those that do not agree.
     """
     from .objective import FrameSubset
     from .quality import correction_between
@@ -368,22 +920,23 @@ def camera_evidence(objective, x_opt: np.ndarray, cameras: dict) -> dict:
     out = []
     for name, (idx, sampling) in cameras.items():
         idx = np.asarray(idx, dtype=np.int64)
-        rec = {"name": name, "frames": int(len(idx)), "checked": len(idx) >= RELIABLE_MIN_FRAMES}
-        if rec["checked"]:
+        rec = CameraCheck(name=name, frames=int(len(idx)),
+                          checked=len(idx) >= RELIABLE_MIN_FRAMES)
+        if rec.checked:
             xc = local_optimum(FrameSubset(objective, idx), x_opt)
             Tc = objective.transforms(xc[None])[0]
             px = displacement_px(objective, x_opt, xc, idx)
             tol = bias_tolerance_px(alignment_px(objective, x_opt, idx), sampling)
             e = pose_error(Tc, T0)
-            d = correction_between(T0, Tc) * np.r_[[100.0] * 3, [1.0] * 3]
-            rec.update(own_optimum_px=round(px, 3), tolerance_px=round(float(tol), 3),
-                       agrees=bool(px <= tol),
-                       separation_deg=round(float(e["rotation_deg"]), 4),
-                       separation_cm=round(float(e["translation_cm"]), 3),
-                       d={a: round(float(v), 4) for a, v in zip(AXES, d)})
+            d = correction_between(T0, Tc) * TO_REPORT
+            rec = dataclasses.replace(
+                rec, own_optimum_px=round(px, 3), tolerance_px=round(float(tol), 3),
+                agrees=bool(px <= tol), separation_deg=round(float(e["rotation_deg"]), 4),
+                separation_m=round(float(e["translation_cm"]), 3) / 100.0,
+                d=_rounded_si(d, 4))
         out.append(rec)
-    return {"cameras": out,
-            "disagreeing": [r["name"] for r in out if r["checked"] and not r["agrees"]]}
+    return CameraAgreement(cameras=tuple(out),
+                           disagreeing=tuple(r.name for r in out if r.checked and not r.agrees))
 
 
 def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
@@ -404,8 +957,9 @@ def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
 def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
               search: SearchSettings,
               res_per_px: np.ndarray | None = None, *, sampling_px: np.ndarray | None = None,
-              bias: np.ndarray | None = None) -> dict:
-    """Per-axis 95 % intervals of the correction (report units: cm and deg).
+              bias: np.ndarray | None = None) -> Intervals:
+    """Per-axis 95 % intervals of the correction (computed in report units, cm and deg, and
+    held in m and deg as written: :class:`Intervals`).
 
     Two parts, combined in quadrature: the frames' disagreement, ``Z95`` jackknife standard
     errors (``jackknife_se``); and what no agreement among frames can show, a bias
@@ -439,14 +993,12 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
 
     Returns
     -------
-    dict
-        ``frame`` (``"lidar"``: the correction's axes), ``units``, ``jackknife_se`` (as
-        used, cm and deg), ``half_width`` per axis
-        (None when not determined), ``determined`` per axis, ``undetermined`` (list of axis
-        names), ``alignment_px``, ``sampling_px`` (u, v), ``per_px`` (report units per pixel
-        rms), ``bias`` (report units) and ``resolution_per_px`` (report units per pixel, one
-        axis moved). The true extrinsic lies, per axis, within ``T_cam_lidar @ D(d)`` for
-        ``|d_axis| <= half_width``.
+    Intervals
+        On the correction's axes (the LiDAR frame): ``jackknife_se`` (as used), ``half_width``
+        per axis (NaN when not determined), ``determined`` per axis, ``alignment_px``,
+        ``sampling_px`` (u, v), ``per_px`` (per pixel rms), ``bias`` and
+        ``resolution_per_px`` (per pixel, one axis moved). The true extrinsic lies, per axis,
+        within ``T_cam_lidar @ D(d)`` for ``|d_axis| <= half_width``.
     """
     se = np.asarray(jackknife_se, dtype=np.float64) * TO_REPORT
     m = np.asarray(per_px, dtype=np.float64) * TO_REPORT
@@ -457,26 +1009,20 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
     s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
-    rnd = lambda v, k: round(float(v), k) if np.isfinite(v) else None  # noqa: E731
-    out = {"frame": "lidar", "units": dict(zip(AXES, ("cm", "cm", "cm", "deg", "deg", "deg"))),
-           "jackknife_se": {a: rnd(v, 5) for a, v in zip(AXES, se)},
-           "half_width": {a: (round(float(h), 4) if k else None)
-                          for a, h, k in zip(AXES, half, ok)},
-           "determined": {a: bool(k) for a, k in zip(AXES, ok)},
-           "undetermined": [a for a, k in zip(AXES, ok) if not k],
-           "alignment_px": None if not np.isfinite(align_px) else round(float(align_px), 4),
-           "sampling_px": (None if sampling_px is None
-                           else [rnd(v, 3) for v in np.asarray(sampling_px, float)]),
-           "per_px": {a: rnd(v, 5) for a, v in zip(AXES, m)},
-           "bias": {a: rnd(v, 5) for a, v in zip(AXES, b)}}
-    if res_per_px is not None:
-        r = np.asarray(res_per_px, dtype=np.float64) * TO_REPORT
-        out["resolution_per_px"] = {a: rnd(v, 5) for a, v in zip(AXES, r)}
-    return out
+    return Intervals(
+        jackknife_se=_rounded_si(se, 5), half_width=_rounded_si(np.where(ok, half, np.nan), 4),
+        determined=ok,
+        alignment_px=round(float(align_px), 4) if np.isfinite(align_px) else np.nan,
+        sampling_px=(None if sampling_px is None else
+                     np.array([round(float(v), 3) if np.isfinite(v) else np.nan
+                               for v in np.asarray(sampling_px, float)])),
+        per_px=_rounded_si(m, 5), bias=_rounded_si(b, 5),
+        resolution_per_px=(None if res_per_px is None else
+                           _rounded_si(np.asarray(res_per_px, dtype=np.float64) * TO_REPORT, 5)))
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
-                    sampling: np.ndarray | None = None, cameras: dict | None = None) -> dict:
+                    sampling: np.ndarray | None = None, cameras: dict | None = None) -> Evidence:
     """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
     the restart(s), the image-cloud agreement and the intervals (see the module docstring).
     The intervals use their own jackknife, at the result's local optimum (not the run's
@@ -488,7 +1034,7 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     if settings.decision.restarts > 0:
         restart = restart_evidence(objective, settings.search, settings.decision, n_min,
                                    n_max, x)
-        x_opt = np.asarray(restart.pop("result_optimum"))
+        x_opt = np.asarray(restart.result_optimum)
     else:
         x_opt = local_optimum(objective, x)
     # The frames' disagreement about the optimum, linearised where the objective's gradient
@@ -497,19 +1043,18 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
     align = alignment_px(objective, x_opt)
     per_px = pose_per_px(objective, x_opt)
-    out = {"contrast": contrast_evidence(objective, settings.search, x_opt),
-           "start": start_evidence(objective, x_opt),
-           "intervals": intervals(at_opt.jackknife_se, per_px, align, settings.search,
-                                  axis_resolution(objective, x_opt), sampling_px=sampling,
-                                  bias=bias_tolerance_px(align, sampling) * per_px)}
-    if restart is not None:
-        out["restart"] = restart
-    if cameras is not None and len(cameras) > 1:
-        out["cameras"] = camera_evidence(objective, x_opt, cameras)
-    return out
+    return Evidence(
+        contrast=contrast_evidence(objective, settings.search, x_opt),
+        start=start_evidence(objective, x_opt),
+        intervals=intervals(at_opt.jackknife_se, per_px, align, settings.search,
+                            axis_resolution(objective, x_opt), sampling_px=sampling,
+                            bias=bias_tolerance_px(align, sampling) * per_px),
+        restart=restart,
+        cameras=(camera_evidence(objective, x_opt, cameras)
+                 if cameras is not None and len(cameras) > 1 else None))
 
 
-def reliability(result: "CalibrationResult") -> dict:
+def reliability(result: "CalibrationResult") -> Reliability:
     """A short verdict on whether to trust ``result``, from what the run already computed.
 
     ``verdict`` is ``"ok"`` or ``"unreliable"`` and ``reasons`` lists what made it
@@ -576,17 +1121,17 @@ def reliability(result: "CalibrationResult") -> dict:
             reasons.append(f"the objective still falls beyond the search bound on "
                            f"{', '.join(beyond)}: the optimum lies outside the box; widen "
                            "--bound-t / --bound-r")
-    basin = (result.decision or {}).get("basin") or {}
-    if basin.get("ambiguous"):
-        alt = f"{basin['separation_deg']:.2g} deg / {basin['separation_cm']:.2g} cm"
-        p = basin["p"] if basin["kept"] == "far" else 1.0 - basin["p"]
-        beyond = basin["kept"] == "near"
+    basin = None if result.decision is None else result.decision.basin
+    if basin is not None and basin.ambiguous:
+        alt = f"{basin.separation_deg:.2g} deg / {cm_written(basin.separation_m, 3):.2g} cm"
+        p = _nan(basin.p) if basin.kept == "far" else 1.0 - _nan(basin.p)
+        near_kept = basin.kept == "near"
         where = ("the result is the optimum next to the initial extrinsic, the other lies "
-                 "beyond the stated --init-error" if beyond else
+                 "beyond the stated --init-error" if near_kept else
                  "the result is the one that fits better")
         reasons.append(
             f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
-            f"{basin['frames']} frames: p = {p:.2g}); {where}; add frames with more varied "
+            f"{basin.frames} frames: p = {p:.2g}); {where}; add frames with more varied "
             "structure, or state a smaller --init-error if the start is known to be close")
     mo = result.motion or {}
     if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
@@ -598,15 +1143,16 @@ def reliability(result: "CalibrationResult") -> dict:
         reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
                        f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
                        "field or the LiDAR's pose (lidar_pose) in calib.yaml")
-    ev = getattr(result, "evidence", None) or {}
+    ev: Evidence = getattr(result, "evidence", None) or Evidence()
     # The frames' agreement as the intervals measure it, at the result's local optimum: at the
     # result itself, a pixel or two away along the objective's flattest direction, each
     # frame's gradient also carries its Hessian's difference from the mean times that offset
     # (z 13.6 cm for a KITTI result 2.2 cm off). The quality report's without the evidence.
-    iv = ev.get("intervals") or {}
+    iv = ev.intervals
     own = {} if q is None else dict(zip(AXES, q.jackknife_se * TO_REPORT))
-    se = {a: v for a, v in (iv.get("jackknife_se") or own).items() if v is not None}
-    units = iv.get("units") or dict(zip(AXES, UNITS))
+    se = {a: v for a, v in (own if iv is None else iv.jackknife_se_report()).items()
+          if v is not None}
+    units = dict(zip(AXES, UNITS))
     se_deg = max([v for a, v in se.items() if units.get(a) == "deg" and np.isfinite(v)],
                  default=None)
     se_cm = max([v for a, v in se.items() if units.get(a) == "cm" and np.isfinite(v)],
@@ -617,75 +1163,68 @@ def reliability(result: "CalibrationResult") -> dict:
     if loose:
         reasons.append(f"the frames disagree: jackknife standard error {', '.join(loose)} "
                        f"(limits {RELIABLE_MAX_SE_DEG:g} deg, {RELIABLE_MAX_SE_CM:g} cm)")
-    rs = ev.get("restart") or {}
-    if rs.get("disagrees"):
-        r = next(r for r in rs["runs"] if r["distinct"])
-        how = ("fits the frames better" if r["mean_px"] > 0 else
+    rs = ev.restart
+    if rs is not None and rs.disagrees:
+        r = next(r for r in rs.runs if r.distinct)
+        how = ("fits the frames better" if r.mean_px > 0 else
                "fits the frames about as well")
-        reasons.append(f"an independent restart of the search ended {r['separation_deg']:.2g} deg"
-                       f" / {r['separation_cm']:.2g} cm away and {how} ({r['frames_restart_better']}"
-                       f" of {r['frames']} frames prefer it): the frames do not single out one "
-                       "pose; add frames with more varied structure (buildings, poles, cars at "
-                       "several distances), or a better --init with a smaller --init-error")
-    cams = ev.get("cameras") or {}
-    for name in cams.get("disagreeing", []):
-        c = next(c for c in cams["cameras"] if c["name"] == name)
+        reasons.append(f"an independent restart of the search ended {r.separation_deg:.2g} deg"
+                       f" / {cm_written(r.separation_m, 3):.2g} cm away and {how} "
+                       f"({r.frames_restart_better} of {r.frames} frames prefer it): the frames "
+                       "do not single out one pose; add frames with more varied structure "
+                       "(buildings, poles, cars at several distances), or a better --init with "
+                       "a smaller --init-error")
+    checks = () if ev.cameras is None else ev.cameras.cameras
+    for name in () if ev.cameras is None else ev.cameras.disagreeing:
+        c = next(c for c in checks if c.name == name)
         reasons.append(
             f"the cameras disagree: camera {name}'s frames alone prefer a pose "
-            f"{c['separation_deg']:.2g} deg / {c['separation_cm']:.2g} cm away, moving its "
-            f"points {c['own_optimum_px']:.2g} px (its edges are trusted to "
-            f"{c['tolerance_px']:.2g} px): a bias that camera's frames share, or calib.yaml's "
+            f"{c.separation_deg:.2g} deg / {cm_written(c.separation_m, 3):.2g} cm away, moving its "
+            f"points {c.own_optimum_px:.2g} px (its edges are trusted to "
+            f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
             "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
             "(without --joint) and compare")
-    ct = ev.get("contrast") or {}
-    weak_z = ct.get("z", np.inf) < CONTRAST_MIN_Z
-    weak_frames = ct.get("frames_clear", 1.0) < CONTRAST_MIN_FRAMES_CLEAR
-    if ct and (weak_z or weak_frames):
-        what = (f"the result fits the image edges only {ct['z']:.2g} spreads better than random "
+    ct = ev.contrast
+    if ct is not None and (ct.z < CONTRAST_MIN_Z or ct.frames_clear < CONTRAST_MIN_FRAMES_CLEAR):
+        what = (f"the result fits the image edges only {ct.z:.2g} spreads better than random "
                 f"poses within the stated initial error (at least {CONTRAST_MIN_Z:g} expected)"
-                if weak_z else
-                f"in only {100 * ct['frames_clear']:.0f} % of the frames does the result fit "
+                if ct.z < CONTRAST_MIN_Z else
+                f"in only {100 * ct.frames_clear:.0f} % of the frames does the result fit "
                 "the image edges better than 95 % of random poses within the stated initial "
                 f"error (at least {100 * CONTRAST_MIN_FRAMES_CLEAR:.0f} % expected)")
         reasons.append(f"images and clouds barely agree: {what}; check that each image "
                        "belongs to its cloud (same time, same camera), the intrinsics, and "
                        "that the scenes have edges both sensors see")
-    iv = ev.get("intervals")
-    if iv and not reasons:
+    if iv is not None and not reasons:
         wide = _imprecise(iv)
         if wide:
             reasons.append(wide)
-    # Intervals hold only where nothing else casts doubt on the result: a wrong basin, frames
-    # that disagree or a result at a bound are all errors the intervals do not measure.
-    return {
-        "verdict": "unreliable" if reasons else "ok",
-        "reasons": reasons,
-        "intervals": None if reasons else iv,
-        "intervals_not_trusted": iv if reasons else None,
-        "evidence": {k: v for k, v in ev.items() if k != "intervals"} or None,
-        # How the start compares, said when the result is not trusted (keep the start?).
-        "start": ev.get("start") if reasons else None,
-        "frames": n_frames,
-        "in_view": None if in_view is None else round(float(in_view), 4),
-        "at_bound": at_bound,
-        "max_jackknife_se_deg": None if se_deg is None else round(float(se_deg), 4),
-        "max_jackknife_se_cm": None if se_cm is None else round(float(se_cm), 3),
-    }
+    # Intervals hold only where nothing else casts doubt on the result (Reliability.intervals):
+    # a wrong basin, frames that disagree or a result at a bound are all errors the intervals
+    # do not measure.
+    return Reliability(
+        verdict="unreliable" if reasons else "ok", reasons=tuple(reasons),
+        evidence=getattr(result, "evidence", None), frames=n_frames,
+        in_view=np.nan if in_view is None else round(float(in_view), 4),
+        at_bound=tuple(at_bound),
+        max_jackknife_se_deg=np.nan if se_deg is None else round(float(se_deg), 4),
+        max_jackknife_se_m=np.nan if se_cm is None else round(float(se_cm), 3) / 100.0)
 
 
-def _imprecise(iv: dict) -> str | None:
+def _imprecise(iv: Intervals) -> str | None:
     """The reason to distrust a result whose intervals are wider than a usable calibration
     allows (:data:`RELIABLE_MAX_HALF_CM`, :data:`RELIABLE_MAX_HALF_DEG`), or None."""
     limit = {"cm": RELIABLE_MAX_HALF_CM, "deg": RELIABLE_MAX_HALF_DEG}
-    units = iv.get("units") or {}
-    wide = [f"{a} +-{h:.2g} {units[a]}" for a, h in (iv.get("half_width") or {}).items()
-            if h is not None and units.get(a) in limit and h > limit[units[a]]]
-    loose = wide + [f"{a} not at all" for a in iv.get("undetermined") or []]
+    units = dict(zip(AXES, UNITS))
+    wide = [f"{a} +-{h:.2g} {units[a]}" for a, h in iv.half_width_report().items()
+            if h is not None and h > limit[units[a]]]
+    loose = wide + [f"{a} not at all" for a in iv.undetermined]
     if not loose:
         return None
     why = ""
-    samp, align = iv.get("sampling_px"), iv.get("alignment_px")
-    if samp and align is not None and None not in samp and 0.5 * min(samp) > align:
+    samp, align = iv.sampling_px, iv.alignment_px
+    if (samp is not None and len(samp) and np.isfinite(align) and np.all(np.isfinite(samp))
+            and 0.5 * min(samp) > align):
         why = (f"; the LiDAR samples this camera's view coarsely (neighbouring returns "
                f"{samp[0]:.2g} px apart along a ring and {samp[1]:.2g} px between rings), so "
                "no frame places an edge closer than half that")
@@ -695,30 +1234,30 @@ def _imprecise(iv: dict) -> str | None:
             "corners, cars at several distances), or keep the start if it was measured better")
 
 
-def verdict_text(rel: dict) -> str:
+def verdict_text(rel: Reliability) -> str:
     """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
     ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
-    reasons = rel.get("reasons") or []
-    if rel.get("verdict") == "ok" or not reasons:
-        return (f"OK: nothing the run measured casts doubt on the result ({rel.get('frames')} "
+    reasons = rel.reasons
+    if rel.ok or not reasons:
+        return (f"OK: nothing the run measured casts doubt on the result ({rel.frames} "
                 "frames)")
     more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
             "result.json)" if len(reasons) > 1 else "")
-    start = f"; {start_text(rel['start'])}" if rel.get("start") else ""
+    start = "" if rel.start is None else f"; {start_text(rel.start)}"
     return f"UNRELIABLE: {reasons[0]}{more}{start}"
 
 
-
-
-def interval_text(rel: dict) -> str | None:
-    """The per-axis 95 % intervals of :func:`reliability` in one line, or None without them:
+def interval_text(rel: Reliability | None) -> str | None:
+    """The per-axis 95 % intervals of :func:`reliability` in one line, or None without them
+    (none, or a result judged unreliable):
     ``"x +-1.2 cm, ..., roll +-0.3 deg; not determined by the data: z"``."""
-    iv = (rel or {}).get("intervals")
-    if not iv:
+    iv = None if rel is None else rel.intervals
+    if iv is None:
         return None
-    parts = [f"{a} +-{h:.2g} {iv['units'][a]}" for a, h in iv["half_width"].items()
+    units = dict(zip(AXES, UNITS))
+    parts = [f"{a} +-{h:.2g} {units[a]}" for a, h in iv.half_width_report().items()
              if h is not None]
     text = ", ".join(parts) if parts else "no axis"
-    if iv.get("undetermined"):
-        text += "; not determined by the data: " + ", ".join(iv["undetermined"])
+    if iv.undetermined:
+        text += "; not determined by the data: " + ", ".join(iv.undetermined)
     return text

@@ -421,11 +421,11 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
               "ref_translation_cm": ref.get("translation_cm"),
               "chamfer": result.objectives()["chamfer"],
               "ms_per_eval": result.objectives().get("ms"),
-              "reliability": rel["verdict"],
-              "reliability_reason": "; ".join(rel["reasons"])}
+              "reliability": rel.verdict,
+              "reliability_reason": "; ".join(rel.reasons)}
     if check:
         c = check_extrinsic(frames, result.T_init, settings)
-        record.update({"check_verdict": c["verdict"], "check_score": c["score"]})
+        record.update({"check_verdict": c.verdict, "check_score": c.score})
     return record
 
 

@@ -168,7 +168,7 @@ def write_joint_summary(result: CalibrationResult, run_dir: str | Path, names: l
     run_dir = Path(run_dir)
     summary = joint_summary(result, names)
     summary.update(source=str(Path(source).resolve()), **extra)
-    verdict = (result.reliability or {}).get("verdict")
+    verdict = None if result.reliability is None else result.reliability.verdict
     for cam in summary["cameras"]:
         # Each camera's extrinsic as a file of its own (an --init file), beside rig.json.
         write_extrinsic(run_dir.parent / cam["extrinsic_file"], np.asarray(cam["T_cam_lidar"]),
@@ -186,7 +186,6 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
     for f in result.sweeps or []:
         mounts.setdefault(joint_camera(f.name),
                           np.eye(4) if f.camera.mount is None else f.camera.mount)
-    rel = result.reliability or {}
     cams = []
     for name in names:
         M = mounts[name]
@@ -195,12 +194,25 @@ def joint_summary(result: CalibrationResult, names: list[str]) -> dict:
         cams.append({"name": name, "run": JOINT_RUN, "extrinsic_file": f"extrinsic_{name}.yaml",
                      "T_cam_lidar": _matrix(T),
                      "T_init": _matrix(T0), "T_camera_first": _matrix(M),
-                     "verdict": rel.get("verdict"), "reasons": rel.get("reasons", []),
-                     "reference_error": ref,
-                     "intervals_95": (rel.get("intervals") or {}).get("half_width")})
+                     **_verdict_record(result), "reference_error": ref,
+                     "intervals_95": _half_widths(result)})
     return {"joint": True, "cameras": cams, "pairs": [],
             "frames_per_camera": {n: sum(joint_camera(f) == n for f in result.frames)
                                   for n in names}}
+
+
+def _verdict_record(result: CalibrationResult) -> dict:
+    """A camera's ``verdict`` and ``reasons`` in rig.json (None and none without a verdict)."""
+    rel = result.reliability
+    return {"verdict": None if rel is None else rel.verdict,
+            "reasons": [] if rel is None else list(rel.reasons)}
+
+
+def _half_widths(result: CalibrationResult) -> dict[str, float | None] | None:
+    """The half-widths of a run's 95 % intervals by axis, cm and deg as result.json writes
+    them (None per axis not determined); None without intervals (not judged ok)."""
+    iv = None if result.reliability is None else result.reliability.intervals
+    return None if iv is None else iv.half_width_report()
 
 
 def _err(T: np.ndarray, T_ref: np.ndarray) -> dict:
@@ -214,14 +226,12 @@ def _matrix(T: np.ndarray) -> list:
 
 def camera_record(name: str, result: CalibrationResult) -> dict:
     """One camera's line of rig.json."""
-    rel = result.reliability or {}
     ref = result.reference_error
     return {"name": name, "run": name, "T_cam_lidar": _matrix(result.T_cam_lidar),
-            "T_init": _matrix(result.T_init), "verdict": rel.get("verdict"),
-            "reasons": rel.get("reasons", []),
+            "T_init": _matrix(result.T_init), **_verdict_record(result),
             "reference_error": None if ref is None else {
                 k: round(float(ref[k]), 4) for k in ("rotation_deg", "translation_cm")},
-            "intervals_95": (rel.get("intervals") or {}).get("half_width")}
+            "intervals_95": _half_widths(result)}
 
 
 def overlap(a: CalibrationResult, b: CalibrationResult, z_min: float) -> dict:
@@ -265,17 +275,19 @@ def consistency(a: CalibrationResult, b: CalibrationResult, T_pair: np.ndarray,
     diff = {ax: round(float(v * (100.0 if i < 3 else 1.0)), 4)
             for i, (ax, v) in enumerate(zip(AXES, p))}
     units = {ax: ("cm" if i < 3 else "deg") for i, ax in enumerate(AXES)}
-    ha = ((a.reliability or {}).get("intervals") or {}).get("half_width") or {}
-    hb = ((b.reliability or {}).get("intervals") or {}).get("half_width") or {}
-    limit = {ax: (None if ha.get(ax) is None or hb.get(ax) is None
-                  else round(float(np.hypot(ha[ax], hb[ax])), 4)) for ax in AXES}
+    ha = _half_widths(a) or {}
+    hb = _half_widths(b) or {}
+    limit: dict[str, float | None] = {}
+    for ax in AXES:
+        x, y = ha.get(ax), hb.get(ax)
+        limit[ax] = None if x is None or y is None else round(float(np.hypot(x, y)), 4)
     bounds = {ax: v for ax, v in limit.items() if v is not None}     # in AXES' order
     checked = list(bounds)
     beyond = [ax for ax, v in bounds.items() if abs(diff[ax]) > v]
     out = {"against": against, "frame": "lidar", "difference": diff, "units": units,
            "limit_95": limit, "axes_checked": checked}
     if not checked:
-        unjudged = [r for r in (a, b) if not (r.reliability or {}).get("intervals")]
+        unjudged = [r for r in (a, b) if _half_widths(r) is None]
         out.update(verdict="not checked",
                    reason="a run judged unreliable has no intervals" if unjudged else
                    "neither run determines an axis to a 95 % interval")

@@ -59,7 +59,7 @@ def pareto_figure(result, path: Path) -> None:
         ax.scatter(F[:, 0], F[:, 1], s=26, color="tab:blue", edgecolor="k", lw=0.3,
                    label="final front", zorder=3)
     ax.scatter([F[i, 0]], [F[i, 1]], s=220, marker="*", color="tab:red", edgecolor="k",
-               zorder=4, label=f"chosen ({result.decision['rule']}, n = {result.n_points})")
+               zorder=4, label=f"chosen ({result.decision.rule}, n = {result.n_points})")
     ax.set_xlabel("f1: Chamfer objective (px, lower is better)")
     ax.set_ylabel("f2: normalised cost (t_norm + m_norm)")
     ax.set_title("Pareto front")
@@ -72,9 +72,9 @@ def pareto_figure(result, path: Path) -> None:
     ax.plot(ms, dev + 0.1, "o-", ms=3.5, color="tab:purple", lw=1)
     ax.scatter([ms[i]], [dev[i] + 0.1], s=220, marker="*", color="tab:red", edgecolor="k",
                zorder=4, label=f"chosen, {dev[i]:.2f} px")
-    if "max_deviation_px" in result.decision:
-        ax.axhline(result.decision["max_deviation_px"] + 0.1, color="0.4", ls="--", lw=1,
-                   label=f"acceptance, {result.decision['max_deviation_px']:g} px")
+    limit = result.decision.max_deviation_px
+    if limit is not None:
+        ax.axhline(limit + 0.1, color="0.4", ls="--", lw=1, label=f"acceptance, {limit:g} px")
     ax.set_yscale("log")
     ax.set_xlabel("modelled evaluation time (ms)")
     ax.set_ylabel("deviation from best-supported solution + 0.1 (px, log)")
@@ -99,10 +99,10 @@ def pareto_figure(result, path: Path) -> None:
         h2, l2 = ax3.get_legend_handles_labels()
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center")
     rel = getattr(result, "reliability", None)
-    if rel:
+    if rel is not None:
         from ..verdict import verdict_text
 
-        ok = rel.get("verdict") == "ok"
+        ok = rel.ok
         fig.suptitle(textwrap.fill(verdict_text(rel), 40 * panels), fontsize=10,
                      color="darkgreen" if ok else "darkred", fontweight="bold")
     fig.tight_layout()

@@ -573,7 +573,7 @@ def _plot_spec(result, solutions: list[dict]) -> dict:
             "y_title": "f2: normalised cost (t_norm + m_norm)",
             "color": [s["ref_rotation_deg"] for s in solutions] if has_ref else None,
             "color_title": "rot. error (deg)",
-            "chosen_label": f"chosen ({result.decision.get('rule', '?')}, n = {result.n_points})"}
+            "chosen_label": f"chosen ({result.decision.rule or '?'}, n = {result.n_points})"}
 
 
 def _run_table(result, frame: Frame) -> str:
@@ -585,7 +585,7 @@ def _run_table(result, frame: Frame) -> str:
                           else ")")),
             ("first frame shown", html.escape(frame.name)),
             ("chosen", f"solution {result.chosen} of {len(result.front.X)}, "
-                       f"rule {html.escape(str(result.decision.get('rule', '?')))}"),
+                       f"rule {html.escape(result.decision.rule or '?')}"),
             ("chosen n", f"{result.n_points} points/frame"),
             ("f1 / f2", f"{obj['chamfer']:.4f} px / {obj['cost']:.4f}"),
             ("cost", f"{obj.get('ms', float('nan')):.4g} ms, {int(obj.get('bytes', 0)):,} bytes")]
@@ -606,13 +606,13 @@ def _run_table(result, frame: Frame) -> str:
 def _verdict_banner(result) -> str:
     """The run's verdict as a banner: every reason when it is unreliable."""
     rel = getattr(result, "reliability", None)
-    if not rel:
+    if rel is None:
         return ""
     from ..verdict import interval_text, verdict_text
 
-    ok = rel.get("verdict") == "ok"
+    ok = rel.ok
     items = "" if ok else "<ul>" + "".join(f"<li>{html.escape(r)}</li>"
-                                            for r in rel.get("reasons", [])) + "</ul>"
+                                            for r in rel.reasons) + "</ul>"
     head = verdict_text(rel) if ok else "UNRELIABLE: do not use this result as it is"
     iv = interval_text(rel)
     iv = "" if iv is None else (f'<div class="intervals">95 % intervals per axis (LiDAR frame): '

@@ -81,7 +81,7 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
     written.append(out / "pareto.csv")
     write_extrinsic(out / "extrinsic.yaml", result.T_cam_lidar,
                     comment=f"paretocal {doc['version']}: chosen T_cam_lidar (LiDAR -> camera), "
-                            f"rule {result.decision['rule']}, n = {result.n_points}")
+                            f"rule {result.decision.rule}, n = {result.n_points}")
     written.append(out / "extrinsic.yaml")
     written += write_exports(out, result.T_cam_lidar, kitti_rect_of(frames), str(doc["version"]))
     if figures:

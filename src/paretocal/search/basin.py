@@ -19,15 +19,16 @@ reported as ambiguous when the data lean towards it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..config import SearchSettings
 from ..objective.objective import AlignmentObjective, PopulationObjective
-from ..quality import displacement_px, local_optimum
+from ..quality import cm_written, displacement_px, local_optimum
 from .front_polish import polish_front
 
 #: One-sided p value of the paired t test (per-frame objective differences) below which the
@@ -45,6 +46,99 @@ MIN_FRAMES = 2
 #: Two poses whose projections differ by less than this share of the distance-transform
 #: truncation are one basin: the objective cannot separate them.
 SAME_BASIN_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class BasinTest:
+    """The near/far basin test of a polished front (:func:`prefer_near`): the local optimum
+    next to the start ("near") against the one of the front's best solution ("far"). The
+    figures are held as ``result.json`` writes them (``decision.basin``), rounded.
+
+    Attributes
+    ----------
+    separation_px : float
+        Mean displacement of the feature points between the two optima (px, 3 decimals).
+    separation_deg : float
+        Rotation between them (deg, 4 decimals).
+    separation_m : float
+        Translation between them (m; written in cm, 3 decimals).
+    departure_near, departure_far : float
+        How far each lies from the start in units of the stated initial error (3 decimals;
+        :func:`departure`).
+    ambiguous : bool
+        Two distinct optima the frames do not tell apart (module docstring).
+    same_basin : bool
+        One basin: the objective cannot separate them.
+    kept : str
+        ``"near"`` or ``"far"``.
+    mean_px, se_px, t, p : float or None
+        The paired comparison of two basins (:func:`paired_preference`, 4 decimals; ``mean_px``
+        positive when "far" fits better, ``p`` one-sided; NaN where there is no test); None
+        for one basin.
+    frames, frames_far_better : int or None
+        Frames compared, and those that prefer "far"; None for one basin.
+    alternative : ndarray, shape (6,), or None
+        The correction of the optimum not kept (m, deg); None for one basin.
+    rebuilt : bool or None
+        Whether the whole front was rebuilt around the optimum kept; None for one basin.
+    """
+
+    separation_px: float
+    separation_deg: float
+    separation_m: float
+    departure_near: float
+    departure_far: float
+    ambiguous: bool
+    same_basin: bool
+    kept: str
+    mean_px: float | None = None
+    se_px: float | None = None
+    t: float | None = None
+    p: float | None = None
+    frames: int | None = None
+    frames_far_better: int | None = None
+    alternative: np.ndarray | None = None
+    rebuilt: bool | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (``decision.basin``; the separation in cm)."""
+        out: dict[str, Any] = {
+            "separation_px": float(self.separation_px),
+            "separation_deg": float(self.separation_deg),
+            "separation_cm": cm_written(self.separation_m, 3),
+            "departure_near": float(self.departure_near),
+            "departure_far": float(self.departure_far),
+            "ambiguous": bool(self.ambiguous), "same_basin": bool(self.same_basin)}
+        if self.frames is not None:
+            out.update(mean_px=self.mean_px, se_px=self.se_px, t=self.t, p=self.p,
+                       frames=int(self.frames), frames_far_better=self.frames_far_better)
+        out["kept"] = self.kept
+        if self.alternative is not None:
+            out["alternative"] = [float(v) for v in self.alternative]
+        if self.rebuilt is not None:
+            out["rebuilt"] = bool(self.rebuilt)
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "BasinTest":
+        """Read back from :meth:`to_dict`'s form (``result.json``'s ``decision.basin``)."""
+        def opt(key, kind):
+            v = doc.get(key)
+            return None if v is None else kind(v)
+
+        alt = doc.get("alternative")
+        return cls(separation_px=float(doc["separation_px"]),
+                   separation_deg=float(doc["separation_deg"]),
+                   separation_m=float(doc["separation_cm"]) / 100.0,
+                   departure_near=float(doc["departure_near"]),
+                   departure_far=float(doc["departure_far"]),
+                   ambiguous=bool(doc.get("ambiguous", False)),
+                   same_basin=bool(doc.get("same_basin", False)), kept=str(doc["kept"]),
+                   mean_px=opt("mean_px", float), se_px=opt("se_px", float),
+                   t=opt("t", float), p=opt("p", float), frames=opt("frames", int),
+                   frames_far_better=opt("frames_far_better", int),
+                   alternative=None if alt is None else np.array(alt, dtype=np.float64),
+                   rebuilt=opt("rebuilt", bool))
 
 
 def paired_preference(objective: AlignmentObjective, near: np.ndarray, far: np.ndarray) -> dict:
@@ -82,7 +176,7 @@ def departure(x: np.ndarray, init_error_deg: float, init_error_m: float) -> floa
 
 def prefer_near(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
                 search: SearchSettings, n_min: int, n_max: int,
-                polish_iters: int) -> tuple[np.ndarray, np.ndarray, dict, int]:
+                polish_iters: int) -> tuple[np.ndarray, np.ndarray, BasinTest, int]:
     """Keep the start's basin unless the data support the front's best pose (module docstring).
 
     Parameters
@@ -103,12 +197,12 @@ def prefer_near(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
         again from the optimum kept, and when a solution of it lies nearer the other optimum
         (in mean pixel displacement), rebuilt around the one kept (n grid, valleys,
         cross-seeds: :func:`polish_front`).
-    info : dict
-        ``same_basin`` (bool), ``separation_px``, ``separation_deg``, ``separation_cm``, the
-        paired comparison (``t``, ``mean_px``, ``p``, ...), ``departure_near`` and
-        ``departure_far`` (in units of the stated initial error), ``kept`` ("near" or "far"),
-        ``ambiguous`` (bool), ``alternative`` (the correction of the pose not kept, m and
-        deg) and ``rebuilt`` (bool: the whole front rebuilt) when they are two basins.
+    info : BasinTest
+        Whether they are one basin, their separation, the paired comparison,
+        ``departure_near`` and ``departure_far`` (in units of the stated initial error),
+        ``kept`` ("near" or "far"), ``ambiguous``, and when they are two basins the
+        ``alternative`` (the correction of the pose not kept, m and deg) and ``rebuilt`` (the
+        whole front rebuilt).
     evaluations : int
     """
     from ..geometry import pose_error
@@ -123,39 +217,38 @@ def prefer_near(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
     T = objective.transforms(np.vstack([near, far]))
     e = pose_error(T[1], T[0])
     s = search
-    info: dict[str, Any] = {
-        "separation_px": round(float(sep_px), 3),
-        "separation_deg": round(float(e["rotation_deg"]), 4),
-        "separation_cm": round(float(e["translation_cm"]), 3),
-        "departure_near": round(departure(near, s.init_error_deg, s.init_error_m), 3),
-        "departure_far": round(departure(far, s.init_error_deg, s.init_error_m), 3),
-        "ambiguous": False}
+    info = BasinTest(separation_px=round(float(sep_px), 3),
+                     separation_deg=round(float(e["rotation_deg"]), 4),
+                     separation_m=round(float(e["translation_cm"]), 3) / 100.0,
+                     departure_near=round(departure(near, s.init_error_deg, s.init_error_m), 3),
+                     departure_far=round(departure(far, s.init_error_deg, s.init_error_m), 3),
+                     ambiguous=False, same_basin=True, kept="far")
     limit = SAME_BASIN_SHARE * objective.scene.truncation_px
     if sep_px <= limit:
-        info.update(same_basin=True, kept="far")
         return X, F, info, evals
     cmp = paired_preference(objective, near, far)
-    info.update(same_basin=False, **{k: (round(v, 4) if isinstance(v, float) else v)
-                                     for k, v in cmp.items()})
     tested = cmp["frames"] >= MIN_FRAMES and np.isfinite(cmp["p"])
     distinct = (e["rotation_deg"] > USABLE_DEG) or (e["translation_cm"] > 100 * USABLE_M)
-    if info["departure_far"] <= 1.0:
+    if info.departure_far <= 1.0:
         # Inside the stated error the data decide.
         keep_far = cmp["mean_px"] >= 0.0
         p_kept = cmp["p"] if keep_far else 1.0 - cmp["p"]
-        info["ambiguous"] = bool(distinct and (not tested or p_kept >= AMBIGUOUS_P))
+        ambiguous = bool(distinct and (not tested or p_kept >= AMBIGUOUS_P))
     else:
         keep_far = bool(tested and cmp["p"] < CLEAR_P)
         # The data lean beyond the stated error without clear evidence.
-        info["ambiguous"] = bool(distinct and not keep_far and cmp["mean_px"] > 0.0)
+        ambiguous = bool(distinct and not keep_far and cmp["mean_px"] > 0.0)
     kept, other = (far, near) if keep_far else (near, far)
-    info.update(kept="far" if keep_far else "near", alternative=[float(v) for v in other[:6]])
     # Every n of the front starts again from the optimum kept (a front polished solution by
     # solution may straddle both basins). A front whose every solution is nearer the basin
     # kept than the other was explored there already (as a rule the search's basin was kept):
     # each n is only polished again; otherwise the whole front is rebuilt around it.
     rebuild = not np.all(displacement_px(objective, kept, X) < displacement_px(objective, other, X))
-    info["rebuilt"] = bool(rebuild)
+    info = dataclasses.replace(
+        info, ambiguous=ambiguous, same_basin=False, kept="far" if keep_far else "near",
+        mean_px=round(cmp["mean_px"], 4), se_px=round(cmp["se_px"], 4), t=round(cmp["t"], 4),
+        p=round(cmp["p"], 4), frames=cmp["frames"], frames_far_better=cmp["frames_far_better"],
+        alternative=np.array(other[:6], dtype=np.float64), rebuilt=bool(rebuild))
     ns = np.unique(X[:, 6])
     Xn = np.column_stack([np.tile(kept[:6], (len(ns), 1)), ns])
     Xn, Fn, ev = polish_front(objective, Xn, objective.evaluate(Xn), search, n_min, n_max,

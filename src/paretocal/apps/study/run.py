@@ -281,7 +281,7 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
                                                                        "local_history")},
         "epsilon_constraint": ec,
         "decision": {"knee_region": knee["region"], "chosen": int(result.chosen),
-                     **result.decision},
+                     **result.decision.to_dict()},
         "innovization": {"findings": text, "trends": fits},
         "robustness": rsum,
     }
