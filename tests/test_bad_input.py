@@ -808,6 +808,66 @@ def test_reliability_reasons(over, reason):
     json.dumps(rel.to_dict(), allow_nan=False)           # plain JSON
 
 
+def _restart(correction):
+    """A restart that disagrees, its pose at ``correction`` (m, deg) from the start."""
+    return {"restart": {"disagrees": True, "runs": [
+        {"distinct": True, "separation_deg": 4.0, "separation_cm": 30.0, "mean_px": 0.1,
+         "frames_restart_better": 3, "frames": 4, "correction": correction}]}}
+
+
+EDGELESS = {"frames_contributing": 4, "per_frame": [
+    {"frame": "a", "depth_edge": 400, "intensity_edge": 200, "smooth": 500},
+    {"frame": "b", "depth_edge": 12, "intensity_edge": 9, "smooth": 800},
+    {"frame": "c", "depth_edge": 300, "intensity_edge": 100, "smooth": 500},
+    {"frame": "d", "depth_edge": 0, "intensity_edge": 3, "smooth": 900}]}
+
+
+@pytest.mark.parametrize("over, says, never", [
+    # The restart's pose lies farther from the start than the result (8 deg against 0.5):
+    # a smaller stated error that keeps the result and leaves it out is worth stating.
+    ({"x": [0.01, 0, 0, 0.5, 0, 0], "evidence": _restart([0.02, 0, 0, 8.0, 0, 0])},
+     ["add frames with more varied structure", "state a smaller initial error "
+      "(--init-error 2,0.06 keeps the result inside the search box"], []),
+    # ... nearer the start than the result: a smaller stated error cannot help; not offered.
+    ({"x": [0.05, 0, 0, 1.5, 0, 0], "evidence": _restart([0.01, 0, 0, 0.5, 0, 0])},
+     ["add frames with more varied structure"], ["--init-error"]),
+    # The ambiguous basin kept the start's own optimum: no advice to narrow the stated error.
+    ({"basin": _basin(ambiguous=True, kept="near", p=0.2, frames=4)},
+     ["add frames with more varied structure"], ["smaller --init-error"]),
+    ({"basin": _basin(ambiguous=True, kept="far", p=0.8, frames=4)},
+     ["state a smaller --init-error if the start is known to be close"], []),
+    # Frames without edges are named when the verdict is unreliable ...
+    ({"frames": ["a", "b"], "feature_counts": EDGELESS},
+     ["few edges: 2 of 4 frames (b, d) have fewer than 30 LiDAR edge points in view"], []),
+])
+def test_advice_follows_the_evidence(over, says, never):
+    from paretocal.verdict import reliability
+
+    rel = reliability(_fake_result(**over))
+    text = " | ".join(rel.reasons)
+    assert rel.verdict == "unreliable"
+    for s in says:
+        assert s in text, text
+    for s in never:
+        assert s not in text, text
+
+
+def test_frames_without_edges_alone_leave_the_verdict_ok():
+    """... and alone they only add nothing: the verdict stays ok."""
+    from paretocal.verdict import reliability
+
+    rel = reliability(_fake_result(feature_counts=EDGELESS))
+    assert rel.verdict == "ok" and rel.reasons == ()
+
+
+def test_a_contrast_without_spread_is_no_agreement():
+    from paretocal.verdict import reliability
+
+    rel = reliability(_fake_result(evidence={"contrast": {"frames_clear": 1.0, "z": None}}))
+    assert rel.verdict == "unreliable"
+    assert "every random pose within the stated initial error scores alike" in rel.reasons[0]
+
+
 @pytest.mark.parametrize("over, ok", [({}, True), ({"frames": ["a", "b"]}, False)])
 def test_intervals_are_given_only_for_a_result_judged_ok(over, ok):
     """An unreliable result's intervals are not what they claim (a wrong basin, frames that

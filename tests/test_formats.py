@@ -843,3 +843,21 @@ def test_the_readmes_calib_examples_load(tmp_path, raw_frames):
         got = detect_source(root).frames[0]
         assert got.camera.model == {"pinhole": "pinhole", "fisheye": "fisheye",
                                     "mei": "mei"}[cam["model"]]
+
+
+def test_result_files_are_standard_json():
+    """result.json, batch records and rig.json hold no NaN or Infinity token (a one-frame
+    run's jackknife has no value): such figures are written null."""
+    import json
+
+    from paretocal.report.results import dumps
+
+    doc = {"a": float("nan"), "b": np.float32(np.inf), "c": [np.nan, 1.5],
+           "d": np.array([1.0, np.nan]), "e": (np.int64(3), "x"), "f": {"g": -np.inf}}
+
+    def refuse(token):
+        raise ValueError(token)
+
+    back = json.loads(dumps(doc), parse_constant=refuse)
+    assert back == {"a": None, "b": None, "c": [None, 1.5], "d": [1.0, None], "e": [3, "x"],
+                    "f": {"g": None}}

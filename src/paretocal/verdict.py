@@ -1129,10 +1129,14 @@ def reliability(result: "CalibrationResult") -> Reliability:
         where = ("the result is the optimum next to the initial extrinsic, the other lies "
                  "beyond the stated --init-error" if near_kept else
                  "the result is the one that fits better")
+        # A smaller stated error helps only when the result kept is the far pose: the near
+        # one is the start's own, and a narrower box would keep it.
+        narrower = ("" if near_kept else
+                    ", or state a smaller --init-error if the start is known to be close")
         reasons.append(
             f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
             f"{basin.frames} frames: p = {p:.2g}); {where}; add frames with more varied "
-            "structure, or state a smaller --init-error if the start is known to be close")
+            f"structure{narrower}")
     mo = result.motion or {}
     if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
         reasons.append(f"the LiDAR moved {mo['skew_m']:.2g} m during a sweep and the motion "
@@ -1172,8 +1176,8 @@ def reliability(result: "CalibrationResult") -> Reliability:
                        f" / {cm_written(r.separation_m, 3):.2g} cm away and {how} "
                        f"({r.frames_restart_better} of {r.frames} frames prefer it): the frames "
                        "do not single out one pose; add frames with more varied structure "
-                       "(buildings, poles, cars at several distances), or a better --init with "
-                       "a smaller --init-error")
+                       "(buildings, poles, cars at several distances)"
+                       + _narrower_advice(x, r.correction, err))
     checks = () if ev.cameras is None else ev.cameras.cameras
     for name in () if ev.cameras is None else ev.cameras.disagreeing:
         c = next(c for c in checks if c.name == name)
@@ -1185,10 +1189,15 @@ def reliability(result: "CalibrationResult") -> Reliability:
             "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
             "(without --joint) and compare")
     ct = ev.contrast
-    if ct is not None and (ct.z < CONTRAST_MIN_Z or ct.frames_clear < CONTRAST_MIN_FRAMES_CLEAR):
-        what = (f"the result fits the image edges only {ct.z:.2g} spreads better than random "
+    # A z that is not a number (random poses that all score alike: no spread to compare
+    # with) is no evidence of agreement either.
+    weak_z = ct is not None and not ct.z >= CONTRAST_MIN_Z
+    if ct is not None and (weak_z or ct.frames_clear < CONTRAST_MIN_FRAMES_CLEAR):
+        what = ("every random pose within the stated initial error scores alike: the "
+                "objective finds nothing in the images to align" if not np.isfinite(ct.z) else
+                f"the result fits the image edges only {ct.z:.2g} spreads better than random "
                 f"poses within the stated initial error (at least {CONTRAST_MIN_Z:g} expected)"
-                if ct.z < CONTRAST_MIN_Z else
+                if weak_z else
                 f"in only {100 * ct.frames_clear:.0f} % of the frames does the result fit "
                 "the image edges better than 95 % of random poses within the stated initial "
                 f"error (at least {100 * CONTRAST_MIN_FRAMES_CLEAR:.0f} % expected)")
@@ -1199,6 +1208,9 @@ def reliability(result: "CalibrationResult") -> Reliability:
         wide = _imprecise(iv)
         if wide:
             reasons.append(wide)
+    few = _few_edges(result.feature_counts)
+    if reasons and few:
+        reasons.append(few)
     # Intervals hold only where nothing else casts doubt on the result (Reliability.intervals):
     # a wrong basin, frames that disagree or a result at a bound are all errors the intervals
     # do not measure.
@@ -1209,6 +1221,41 @@ def reliability(result: "CalibrationResult") -> Reliability:
         at_bound=tuple(at_bound),
         max_jackknife_se_deg=np.nan if se_deg is None else round(float(se_deg), 4),
         max_jackknife_se_m=np.nan if se_cm is None else round(float(se_cm), 3) / 100.0)
+
+
+def _narrower_advice(x: np.ndarray, rival: np.ndarray, err: np.ndarray) -> str:
+    """Advice to state a smaller initial error, when the evidence says it would help: the
+    rival pose ``rival`` (6,) lies farther from the start than the result ``x`` (6,), in units
+    of the stated error ``err`` (6,: m and deg), so a box that keeps the result can leave the
+    rival out. Empty otherwise (a start inside the stated error is not told to change it)."""
+    rival = np.asarray(rival, dtype=np.float64)[:6]
+    if not np.all(np.isfinite(rival)):
+        return ""
+    d_x, d_r = float(np.max(np.abs(x) / err)), float(np.max(np.abs(rival) / err))
+    scale = math.sqrt(max(d_x, 1e-3) * d_r)          # between the two, geometrically
+    if d_r <= d_x or scale >= 1.0:
+        return ""
+    return (f", or, if the start is known to be that close, state a smaller initial error "
+            f"(--init-error {scale * err[3]:.2g},{scale * err[0]:.2g} keeps the result inside "
+            "the search box and the other pose outside)")
+
+
+def _few_edges(feature_counts: dict | None) -> str | None:
+    """The frames whose scenes give the objective (almost) no edge to align: fewer than
+    :data:`MIN_POINTS_PER_FRAME` LiDAR edge points (depth and intensity edges) in view. A
+    reason to add to an unreliable verdict (alone, such frames only add nothing); None when
+    every frame has edges."""
+    per = (feature_counts or {}).get("per_frame") or []
+    few = [p.get("frame", "?") for p in per
+           if p.get("depth_edge", 0) + p.get("intensity_edge", 0) < MIN_POINTS_PER_FRAME]
+    if not few:
+        return None
+    more = f" and {len(few) - 3} more" if len(few) > 3 else ""
+    return (f"few edges: {len(few)} of {len(per)} frames ({', '.join(map(str, few[:3]))}{more}) "
+            f"have fewer than {MIN_POINTS_PER_FRAME} LiDAR edge points in view (depth or "
+            "intensity edges): open road, sky or bare walls give the objective nothing to "
+            "align; add frames with structure both sensors see (poles, building corners, "
+            "parked cars)")
 
 
 def _imprecise(iv: Intervals) -> str | None:

@@ -37,7 +37,7 @@ from typing import Any
 
 from ..errors import MESSAGE_CHARS, InputError, ParetocalError, excerpt, first_line, key_list, quote
 from ..io.atomic import atomic_path, atomic_write_text
-from ..report.results import json_default
+from ..report.results import dumps
 
 RECORD = "entry.json"
 #: Names a batch folder holds (runs/ from the first task on): the CLI refuses to write a batch
@@ -364,8 +364,7 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
                 (run_dir / RECORD).unlink(missing_ok=True)
                 record = _attempt(entry, settings, run_dir, check, threads, figures, t0)
                 record.update({"fingerprint": fingerprint, "log": messages})
-                atomic_write_text(run_dir / RECORD,
-                                  json.dumps(record, indent=1, default=json_default) + "\n")
+                atomic_write_text(run_dir / RECORD, dumps(record, indent=1))
         except (ParetocalError, OSError) as exc:   # the folder is locked or cannot be written
             record = _failed(entry, str(exc), t0)
             record.update({"fingerprint": fingerprint, "log": messages})

@@ -27,7 +27,6 @@ per camera, the chosen extrinsic and its verdict, and for each pair of cameras:
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import time
 from itertools import combinations
@@ -43,6 +42,7 @@ from ..geometry import correction_params, invert, pose_error
 from ..inputs import joint_camera, rig_lidar_steps
 from ..io import load_rig_frames, rig_cameras, write_extrinsic
 from ..io.atomic import atomic_write_text
+from ..report.results import dumps
 from ..quality import AXES
 from ..result import CalibrationResult
 from ..rundir import calibrate_run
@@ -130,7 +130,7 @@ def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
                    lidar_steps_done=len({id(v) for v in steps.values()}),
                    wall_s=round(time.perf_counter() - t0, 2))
     if len(results) > 1:
-        atomic_write_text(out / RIG_JSON, json.dumps(summary, indent=1) + "\n")
+        atomic_write_text(out / RIG_JSON, dumps(summary, indent=1))
     return summary
 
 
@@ -174,7 +174,7 @@ def write_joint_summary(result: CalibrationResult, run_dir: str | Path, names: l
         write_extrinsic(run_dir.parent / cam["extrinsic_file"], np.asarray(cam["T_cam_lidar"]),
                         f"camera {cam['name']} of a joint calibration ({run_dir.name}/); "
                         f"verdict {verdict}")
-    atomic_write_text(run_dir.parent / RIG_JSON, json.dumps(summary, indent=1) + "\n")
+    atomic_write_text(run_dir.parent / RIG_JSON, dumps(summary, indent=1))
     return summary
 
 

@@ -68,6 +68,28 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def strict_json(doc):
+    """``doc`` with every number that is not finite (NaN, infinity) as None, numpy values as
+    Python's: what ``json.dumps(..., allow_nan=False)`` writes as standard JSON (a one-frame
+    run's jackknife has no value; strict JSON readers refuse the ``NaN`` token)."""
+    if isinstance(doc, dict):
+        return {k: strict_json(v) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [strict_json(v) for v in doc]
+    if isinstance(doc, np.ndarray):
+        return strict_json(doc.tolist())
+    if isinstance(doc, np.generic):
+        doc = doc.item()
+    if isinstance(doc, float) and not np.isfinite(doc):
+        return None
+    return doc
+
+
+def dumps(doc, indent: int = 2) -> str:
+    """Standard JSON text of ``doc`` (:func:`strict_json`), with a final newline."""
+    return json.dumps(strict_json(doc), indent=indent, allow_nan=False) + "\n"
+
+
 def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
               figures: bool = True, overlay_frame: int = 0) -> list[Path]:
     """Write the run directory; returns the paths written."""
@@ -75,7 +97,7 @@ def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
     out.mkdir(parents=True, exist_ok=True)
     written = []
     doc = result.to_dict()
-    atomic_write_text(out / "result.json", json.dumps(doc, indent=2, default=json_default) + "\n")
+    atomic_write_text(out / "result.json", dumps(doc))
     written.append(out / "result.json")
     atomic_write_text(out / "pareto.csv", front_csv(result))
     written.append(out / "pareto.csv")
