@@ -679,6 +679,14 @@ def _basin(**over):
     return BasinTest.from_dict({**doc, **over})
 
 
+def _wide(photo=None, **over):
+    """An applied wide start (:class:`paretocal.wide.WideStart`) with ``photo`` its check."""
+    from paretocal.wide import PhotoCheck, WideStart
+
+    return WideStart(np.eye(4), np.eye(4), photo=None if photo is None else PhotoCheck(**photo),
+                     **over)
+
+
 def _fake_result(**over):
     """The parts of a CalibrationResult that :func:`reliability` reads."""
     from paretocal.decide import Decision
@@ -752,25 +760,24 @@ def _fake_result(**over):
         {"name": "front", "checked": True, "agrees": True},
         {"name": "left", "checked": False}]}}}, None),
     # The wide start's ambiguity is the verdict's; its disagreement alone is not.
-    ({"wide": {"applied": True, "ambiguity": "the wide search found two poses 2.9 deg / 203 cm "
-               "apart that the frames do not tell apart"}},
+    ({"wide": _wide(ambiguity="the wide search found two poses 2.9 deg / 203 cm apart that "
+                    "the frames do not tell apart")},
      "the wide search found two poses 2.9 deg / 203 cm apart"),
-    ({"wide": {"applied": True, "ambiguity": None, "disagree": True}}, None),
+    ({"wide": _wide(disagreement="the edge objective and photo-consistency prefer poses "
+                    "3 deg / 140 cm apart")}, None),
     # The near/far basin test of the front: two poses the frames do not tell apart.
     ({"basin": _basin(ambiguous=True, kept="near", p=0.2, frames=4)},
      "ambiguous: a pose 3.6 deg / 12 cm away fits the frames about as well (paired test over "
      "4 frames: p = 0.8); the result is the optimum next to the initial extrinsic"),
     ({"basin": _basin(ambiguous=False, kept="far", p=0.001, frames=4)}, None),
     # Photo-consistency checks the calibration that followed a wide start.
-    ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
-        "agree": False, "result": 0.512, "rival": 0.47, "separation_deg": 3.1,
-        "separation_cm": 142.0, "p": 0.0}}},
+    ({"wide": _wide(photo=dict(agree=False, result=0.512, rival=0.47, separation_deg=3.1,
+                               separation_m=1.42, p=0.0))},
      "photo-consistency disagrees: the images agree clearly better at a pose 3.1 deg / 142 cm "
      "from the "
      "result (cost 0.470 against 0.512)"),
-    ({"wide": {"applied": True, "ambiguity": None, "photo_check": {
-        "agree": True, "result": 0.47, "rival": 0.512, "separation_deg": 3.1,
-        "separation_cm": 142.0, "p": 1.0}}}, None),
+    ({"wide": _wide(photo=dict(agree=True, result=0.47, rival=0.512, separation_deg=3.1,
+                               separation_m=1.42, p=1.0))}, None),
     # The jackknife of the intervals (at the local optimum) decides when there is one.
     ({"quality": {"jackknife_se": {"x": 0.1, "y": 0.1, "z": 13.6, "yaw": 0.1, "pitch": 0.1,
                                    "roll": 0.1}},

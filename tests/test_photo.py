@@ -123,13 +123,16 @@ def test_the_wide_start_photo_check_flags_a_result_in_a_less_consistent_basin(sy
     near = X_TRUE @ correction_matrix(np.r_[0.05, 0.0, 0.0, 0.2, 0.0, 0.0])
     w = WideStart(X_TRUE, off, scene=scene, tried=[X_TRUE, near])
     good = photo_check(w, X_TRUE)
-    assert good["agree"] and good["rival"] > good["result"] and w.photo is good
+    assert good.agree and good.rival > good.result and w.photo is good
     assert photo_check(w, X_TRUE) == good                              # seeded
-    assert good["separation_cm"] == pytest.approx(100.0, abs=1.0)     # the start given
+    assert good.separation_m == pytest.approx(1.0, abs=0.01)          # the start given
+    assert good.to_dict()["separation_cm"] == pytest.approx(100.0, abs=1.0)
     bad = photo_check(w, off)
-    assert not bad["agree"] and bad["rival"] < bad["result"] and bad["p"] < 0.01
+    assert not bad.agree and bad.rival < bad.result and bad.p < 0.01
+    assert set(bad.to_dict()) == {"agree", "result", "rival", "separation_deg",
+                                  "separation_cm", "p"}
     alone = photo_check(WideStart(X_TRUE, X_TRUE, scene=scene, tried=[near]), X_TRUE)
-    assert alone["agree"] and alone["rival"] is None
+    assert alone.agree and alone.rival is None and alone.to_dict()["separation_cm"] is None
     assert photo_check(WideStart(None, off), off) is None           # did not apply
 
 

@@ -79,8 +79,9 @@ def test_calibrate_runs_the_wide_start_and_records_it(raw_frames):
     T_ref = raw_frames[0].T_ref
     T0 = decalibrate(T_ref, 20.0, 1.5, 1000)[0]
     r = calibrate(raw_frames, T0, _wide())
-    assert r.wide is not None and r.wide["applied"]
-    assert np.allclose(r.wide["T_given"], T0) and np.allclose(r.T_init, r.wide["T_found"])
+    assert r.wide is not None and r.wide.applied
+    assert np.allclose(r.wide.T_given, T0) and np.allclose(r.T_init, r.wide.T)
+    assert r.wide.images is None and r.wide.scene is None          # its maps are let go
     assert (r.settings.search.init_error_deg, r.settings.search.init_error_m) == (AFTER_DEG,
                                                                                   AFTER_M)
     e = pose_error(r.T_cam_lidar, T_ref)
@@ -97,3 +98,4 @@ def test_calibrate_runs_the_wide_start_and_records_it(raw_frames):
     assert not w["ambiguous"] and w["rounds"] and w["basins"][0]["photo"] > 0
     # Photo-consistency agrees with the calibration that followed.
     assert w["photo_check"]["agree"], w["photo_check"]
+    assert r.wide.photo is not None and w["photo_check"] == r.wide.photo.to_dict()

@@ -160,6 +160,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                                        cameras=stage.camera_groups())
             if wide is not None:
                 photo_check(wide, T[i])
+                # Kept in the result for what it did; its maps are no longer needed.
+                wide.images, wide.scene = None, None
     except Interrupted as exc:
         # The search is complete (and checkpointed): its front is what the run has to show.
         exc.X, exc.F, exc.generation = res.X, res.F, res.generations
@@ -174,7 +176,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         history=res.history, nsga_front=(res.X, res.F), quality=quality,
         objective=stage.objective, seed_poses=seeds, motion=motion_info,
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
-        wide=None if wide is None else wide.to_dict())
+        wide=wide)
     result.reliability = reliability(result)
     if not result.reliability.ok:
         log.warning("the result may be unreliable: %s", "; ".join(result.reliability.reasons))

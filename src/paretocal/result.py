@@ -4,6 +4,7 @@ run measured (:class:`CalibrationResult`), and its ``result.json`` document."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,6 +17,9 @@ from .objective.cost import CostModel
 from .quality import Quality
 from .search import VARIABLES
 from .verdict import Evidence, Reliability, reliability
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .wide import WideStart
 
 
 @dataclass
@@ -73,10 +77,10 @@ class CalibrationResult:
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
     #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
     evidence: Evidence | None = None
-    #: What the wide start did (:meth:`paretocal.wide.WideStart.to_dict`), None when the
-    #: stated error did not ask for it. When it applied, ``T_init`` is the start it found and
-    #: the settings hold the narrower stated error the calibration used from there.
-    wide: dict | None = None
+    #: What the wide start did (written by :meth:`paretocal.wide.WideStart.to_dict`), None
+    #: when the stated error did not ask for it. When it applied, ``T_init`` is the start it
+    #: found and the settings hold the narrower stated error the calibration used from there.
+    wide: WideStart | None = None
     #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
     sweeps: list | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
@@ -145,7 +149,7 @@ class CalibrationResult:
             "quality": None if self.quality is None else self.quality.to_dict(),
             "motion": self.motion,
             "inputs": self.inputs,
-            "wide_start": self.wide,
+            "wide_start": None if self.wide is None else self.wide.to_dict(),
             "reliability": (self.reliability if self.reliability is not None
                             else reliability(self)).to_dict(),
         }

@@ -1080,15 +1080,15 @@ def reliability(result: "CalibrationResult") -> Reliability:
     if in_view is not None and in_view < RELIABLE_MIN_IN_VIEW:
         reasons.append(f"only {100 * in_view:.0f} % of the feature points project into the "
                        f"image at the chosen extrinsic (below {100 * RELIABLE_MIN_IN_VIEW:.0f} %)")
-    wide = getattr(result, "wide", None) or {}
-    if wide.get("ambiguity"):
-        reasons.append(wide["ambiguity"])
-    photo = wide.get("photo_check") or {}
-    if photo.get("agree") is False:
+    wide = getattr(result, "wide", None)
+    if wide is not None and wide.ambiguity:
+        reasons.append(wide.ambiguity)
+    photo = None if wide is None else wide.photo
+    if photo is not None and not photo.agree:
         reasons.append(
             f"photo-consistency disagrees: the images agree clearly better at a pose "
-            f"{photo['separation_deg']:.1f} deg / {photo['separation_cm']:.0f} cm from the result "
-            f"(cost {photo['rival']:.3f} against {photo['result']:.3f}), a basin the edges "
+            f"{photo.separation_deg:.1f} deg / {100 * (photo.separation_m or 0.0):.0f} cm from "
+            f"the result (cost {photo.rival:.3f} against {photo.result:.3f}), a basin the edges "
             "missed or were fooled out of; give a better start, or frames with structure at "
             "several distances")
     s = result.settings.search

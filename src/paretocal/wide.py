@@ -106,6 +106,45 @@ PHOTO_BLOCK_M = 2.0
 PHOTO_RESAMPLES = 400
 
 
+@dataclass(frozen=True)
+class PhotoCheck:
+    """Whether photo-consistency agrees with the calibration that followed a wide start
+    (:func:`photo_check`).
+
+    Attributes
+    ----------
+    agree : bool
+        False when a pose in a distinct basin is clearly more photo-consistent than the result.
+    result : float
+        The result's photo-consistency cost.
+    rival : float or None
+        The most photo-consistent distinct pose's cost (None: no distinct pose was tried).
+    separation_deg : float or None
+        Its rotation from the result (deg).
+    separation_m : float or None
+        Its translation from the result (m).
+    p : float or None
+        The share of the paired bootstrap's resamples in which it is not better.
+    """
+
+    agree: bool
+    result: float
+    rival: float | None = None
+    separation_deg: float | None = None
+    separation_m: float | None = None
+    p: float | None = None
+
+    def to_dict(self) -> dict:
+        """As ``result.json``'s ``wide_start.photo_check`` (cm, rounded)."""
+        return {"agree": bool(self.agree), "result": round(float(self.result), 4),
+                "rival": None if self.rival is None else round(float(self.rival), 4),
+                "separation_deg": (None if self.separation_deg is None
+                                   else round(float(self.separation_deg), 2)),
+                "separation_cm": (None if self.separation_m is None
+                                  else round(100.0 * float(self.separation_m), 1)),
+                "p": None if self.p is None else round(float(self.p), 4)}
+
+
 @dataclass
 class WideStart:
     """What the wide start did (:func:`wide_start`).
@@ -140,7 +179,7 @@ class WideStart:
     images : list or None
         The frames' image features (:attr:`paretocal.stage.Stage.images`), which do not
         depend on the pose: each round and the calibration that follows reuse them.
-    photo : dict or None
+    photo : PhotoCheck or None
         The photo-consistency check of the calibration that followed (:func:`photo_check`).
     scene : PhotoScene or None
         The photo-consistency map (kept for :func:`photo_check`; not written).
@@ -162,7 +201,7 @@ class WideStart:
     seconds: dict = field(default_factory=dict)
     rounds: list = field(default_factory=list)
     images: list | None = field(default=None, repr=False)
-    photo: dict | None = None
+    photo: PhotoCheck | None = None
     scene: PhotoScene | None = field(default=None, repr=False)
     seed: int = 0
     tried: list = field(default_factory=list, repr=False)
@@ -190,7 +229,8 @@ class WideStart:
                 "moved_cm": None if moved is None else round(float(moved["translation_cm"]), 2),
                 "motion": self.motion, "basins": self.basins, "ambiguous": self.ambiguous,
                 "ambiguity": self.ambiguity, "disagree": self.disagree, "rounds": self.rounds,
-                "comparison": self.comparison, "photo_check": self.photo,
+                "comparison": self.comparison,
+                "photo_check": None if self.photo is None else self.photo.to_dict(),
                 "evaluations": int(self.evaluations),
                 "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
 
@@ -513,7 +553,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
                              "by": "photo" if disagree else "edges"}}
 
 
-def photo_check(wide: WideStart, T_result: np.ndarray) -> dict | None:
+def photo_check(wide: WideStart, T_result: np.ndarray) -> PhotoCheck | None:
     """Whether photo-consistency agrees with the calibration that followed a wide start.
 
     The edge objective and photo-consistency share no feature, so a bias that every frame's
@@ -535,12 +575,8 @@ def photo_check(wide: WideStart, T_result: np.ndarray) -> dict | None:
 
     Returns
     -------
-    dict or None
-        ``agree`` (bool), ``result`` (the result's cost), ``rival`` (the most
-        photo-consistent distinct pose's cost, or None when there is none), its
-        ``separation_deg`` / ``separation_cm`` from the result and ``p`` (the share of the
-        resamples in which it is not better); None when the wide start did not apply. Also
-        stored as ``wide.photo``.
+    PhotoCheck or None
+        None when the wide start did not apply. Also stored as ``wide.photo``.
     """
     if not wide.applied or wide.scene is None:
         return None
@@ -552,16 +588,15 @@ def photo_check(wide: WideStart, T_result: np.ndarray) -> dict | None:
             others.append((T, e))
     pc = photo_cost(wide.scene, np.array([T_result] + [T for T, _ in others]))
     cost = pc["cost"]
-    out = {"agree": True, "result": round(float(cost[0]), 4), "rival": None,
-           "separation_deg": None, "separation_cm": None, "p": None}
+    out = PhotoCheck(agree=True, result=float(cost[0]))
     if others:
         k = 1 + int(np.argmin(cost[1:]))
         e = others[k - 1][1]
         p = _photo_p(wide.scene.xyz, pc["point_weight"][[0, k]], pc["point_variance"][[0, k]],
                      float(pc["prior"]), wide.seed)
-        out.update(agree=bool(p >= CLEAR_P), rival=round(float(cost[k]), 4),
-                   separation_deg=round(float(e["rotation_deg"]), 2),
-                   separation_cm=round(float(e["translation_cm"]), 1), p=round(p, 4))
+        out = PhotoCheck(agree=bool(p >= CLEAR_P), result=float(cost[0]), rival=float(cost[k]),
+                         separation_deg=float(e["rotation_deg"]),
+                         separation_m=float(e["translation_cm"]) / 100.0, p=p)
     wide.photo = out
     return out
 
@@ -593,5 +628,5 @@ def _search_axes(mr) -> np.ndarray:
     return np.vstack([a, e, np.cross(a, e)])
 
 
-__all__ = ["AFTER_DEG", "AFTER_M", "WIDE_DEG", "WIDE_M", "WideStart", "after_settings",
-           "baseline_m", "camera_pairs", "photo_check", "wanted", "wide_start"]
+__all__ = ["AFTER_DEG", "AFTER_M", "WIDE_DEG", "WIDE_M", "PhotoCheck", "WideStart",
+           "after_settings", "baseline_m", "camera_pairs", "photo_check", "wanted", "wide_start"]
