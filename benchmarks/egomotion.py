@@ -100,8 +100,9 @@ def measure(name: str, strides: list[int], methods: list[str], show_pairs: bool)
     frames = load_frames(DATA / folder, spec)
     print(f"\n== {name}: {desc}, {len(frames)} frames")
     frames, minfo = compensate_motion(frames, Settings())
-    print(f"   de-skew: {'yes' if minfo.get('compensated') else 'no'} "
-          f"({minfo.get('reason', 'speed %.2f m/s' % minfo.get('speed_mps', float('nan')))})")
+    speed = float("nan") if minfo.speed_mps is None else minfo.speed_mps
+    print(f"   de-skew: {'yes' if minfo.compensated else 'no'} "
+          f"({minfo.reason or 'speed %.2f m/s' % speed})")
     clouds = [f.points[:, :3] for f in frames]
     T_ref = frames[0].T_ref
     out: dict = {"frames": len(frames), "methods": {}, "strides": {}}

@@ -679,6 +679,43 @@ def _basin(**over):
     return BasinTest.from_dict({**doc, **over})
 
 
+def _motion(compensated, **over):
+    """A motion report (:class:`paretocal.inputs.MotionReport`) with an estimate."""
+    from paretocal.inputs import MotionReport
+
+    return MotionReport(compensated, **{"speed_mps": 30.0, "speed_spread_mps": 0.1,
+                                        "v_mps": (30.0, 0.0, 0.0), "yaw_rate_dps": 0.0,
+                                        "observable_xyz": (True, True, True),
+                                        "median_share_xyz": (0.2, 0.4, 0.4),
+                                        "time_offset_s": 0.0, **over})
+
+
+def test_the_motion_report_is_written_as_before():
+    """result.json's ``motion``: the estimate's figures (when there is one), then whether it
+    was applied, and why not or how far it moved a point."""
+    from paretocal.inputs import MotionReport
+
+    assert MotionReport(False, "one frame").to_dict() == {"compensated": False,
+                                                          "reason": "one frame"}
+    done = _motion(True, skew_m=3.0, max_shift_m=1.5).to_dict()
+    assert list(done) == ["speed_mps", "speed_spread_mps", "v_mps", "yaw_rate_dps",
+                          "observable_xyz", "median_share_xyz", "time_offset_s", "skew_m",
+                          "compensated", "max_shift_m"]
+    assert done["v_mps"] == [30.0, 0.0, 0.0] and done["compensated"] is True
+    left = _motion(False, skew_m=3.0, reason="not observable").to_dict()
+    assert list(left)[-2:] == ["compensated", "reason"] and "max_shift_m" not in left
+    json.dumps(done, allow_nan=False)
+
+
+def test_clouds_without_time_are_not_deskewed(raw_frames):
+    from paretocal.config import Settings
+    from paretocal.inputs import compensate_motion
+
+    frames, report = compensate_motion(raw_frames[:2], Settings())
+    assert frames == raw_frames[:2] and not report.compensated
+    assert "no per-point time" in report.reason and report.speed_mps is None
+
+
 def _wide(photo=None, **over):
     """An applied wide start (:class:`paretocal.wide.WideStart`) with ``photo`` its check."""
     from paretocal.wide import PhotoCheck, WideStart
@@ -704,7 +741,8 @@ def _fake_result(**over):
     r = SimpleNamespace(frames=over.pop("frames", ["a", "b", "c", "d"]), chosen=0,
                         front=SimpleNamespace(X=X), quality=q,
                         decision=Decision(rule="knee", deviation_px=0.0,
-                                          basin=over.pop("basin", None)), motion=None,
+                                          basin=over.pop("basin", None)),
+                        motion=over.pop("motion", None),
                         feature_counts=over.pop("feature_counts", {}),
                         evidence=Evidence.from_dict(over.pop("evidence", {})),
                         wide=over.pop("wide", None),
@@ -770,6 +808,13 @@ def _fake_result(**over):
      "ambiguous: a pose 3.6 deg / 12 cm away fits the frames about as well (paired test over "
      "4 frames: p = 0.8); the result is the optimum next to the initial extrinsic"),
     ({"basin": _basin(ambiguous=False, kept="far", p=0.001, frames=4)}, None),
+    # A sweep skewed by the motion and left as recorded.
+    ({"motion": _motion(False, skew_m=3.0, reason="ego-motion is not observable along x")},
+     "the LiDAR moved 3 m during a sweep and the motion could not be compensated (ego-motion "
+     "is not observable along x)"),
+    ({"motion": _motion(False, skew_m=0.05, reason="ego-motion is not observable along x")},
+     None),
+    ({"motion": _motion(True, skew_m=3.0, max_shift_m=1.5)}, None),
     # Photo-consistency checks the calibration that followed a wide start.
     ({"wide": _wide(photo=dict(agree=False, result=0.512, rival=0.47, separation_deg=3.1,
                                separation_m=1.42, p=0.0))},

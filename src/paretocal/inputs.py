@@ -36,7 +36,66 @@ def resolve_init(frames: list[Frame], T_init: np.ndarray | None) -> tuple[np.nda
     return np.asarray(T_init, dtype=np.float64), T_ref
 
 
-def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Frame], dict]:
+@dataclasses.dataclass(frozen=True)
+class MotionReport:
+    """What :func:`compensate_motion` did with the sweeps' motion.
+
+    Attributes
+    ----------
+    compensated : bool
+        Whether the sweeps were de-skewed.
+    reason : str or None
+        Why not, in words.
+    speed_mps, speed_spread_mps : float or None
+        The estimated speed (m/s) and its spread over the pairs; None when nothing was
+        estimated.
+    v_mps : tuple of float, shape (3,), or None
+        The velocity in the LiDAR frame (m/s).
+    yaw_rate_dps : float or None
+        The turn rate (deg/s).
+    observable_xyz : tuple of bool, shape (3,), or None
+        The axes the scan-to-scan registration constrains.
+    median_share_xyz : tuple of float, shape (3,), or None
+        Each axis's median share of the translation information.
+    time_offset_s : float or None
+        The time offset applied to the sweeps' centre times (s).
+    skew_m : float or None
+        How far the sensor moves during the longest sweep (m).
+    max_shift_m : float or None
+        The largest displacement the de-skew applied to a point (m).
+    """
+
+    compensated: bool
+    reason: str | None = None
+    speed_mps: float | None = None
+    speed_spread_mps: float | None = None
+    v_mps: tuple | None = None
+    yaw_rate_dps: float | None = None
+    observable_xyz: tuple | None = None
+    median_share_xyz: tuple | None = None
+    time_offset_s: float | None = None
+    skew_m: float | None = None
+    max_shift_m: float | None = None
+
+    def to_dict(self) -> dict:
+        """As ``result.json``'s ``motion`` writes it: the estimate's figures (when there is
+        one), then whether it was applied, and why not or how far it moved a point."""
+        out: dict = {}
+        if self.speed_mps is not None:
+            out.update(speed_mps=self.speed_mps, speed_spread_mps=self.speed_spread_mps,
+                       v_mps=list(self.v_mps or ()), yaw_rate_dps=self.yaw_rate_dps,
+                       observable_xyz=list(self.observable_xyz or ()),
+                       median_share_xyz=list(self.median_share_xyz or ()),
+                       time_offset_s=self.time_offset_s, skew_m=self.skew_m)
+        out["compensated"] = bool(self.compensated)
+        if self.reason is not None:
+            out["reason"] = self.reason
+        if self.max_shift_m is not None:
+            out["max_shift_m"] = self.max_shift_m
+        return out
+
+
+def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Frame], MotionReport]:
     """De-skew every sweep to its image time with ego-motion estimated from the sequence.
 
     A spinning LiDAR on a moving vehicle stores each point at its own time (a 10 Hz sweep at
@@ -51,9 +110,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
     -------
     frames : list of Frame
         De-skewed copies (points in the same order), or the input frames.
-    info : dict
-        ``compensated`` (bool), ``reason`` (when not), the estimate's figures, and
-        ``max_shift_m``: the largest displacement the de-skew applied to a point.
+    info : MotionReport
     """
     import dataclasses
 
@@ -62,15 +119,14 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
 
     m = settings.motion
     if m.deskew == "off":
-        return frames, {"compensated": False, "reason": "de-skewing is off (motion.deskew)"}
+        return frames, MotionReport(False, "de-skewing is off (motion.deskew)")
     times = [f.time for f in frames if f.time is not None]
     if len(times) < len(frames):
-        return frames, {"compensated": False,
-                        "reason": "the clouds carry no per-point time: motion during a sweep "
-                                  "is not compensated (a moving vehicle's clouds are skewed)"}
+        return frames, MotionReport(False, "the clouds carry no per-point time: motion during a "
+                                           "sweep is not compensated (a moving vehicle's clouds "
+                                           "are skewed)")
     if len(frames) < 2:
-        return frames, {"compensated": False,
-                        "reason": "one frame: ego-motion needs a sequence of sweeps"}
+        return frames, MotionReport(False, "one frame: ego-motion needs a sequence of sweeps")
     order = np.argsort([float(np.median(t)) for t in times], kind="stable")
     clouds = [(np.asarray(frames[k].points[:, :3], dtype=np.float64), times[k])
               for k in order]
@@ -78,22 +134,21 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
         est = estimate_motion(clouds, per_frame=m.per_frame, points=m.points,
                                  seed=settings.search.seed)
     except ValueError as exc:
-        return frames, {"compensated": False, "reason": f"ego-motion estimate failed: {exc}"}
-    info = {"speed_mps": round(float(est.speed), 3),
-            "speed_spread_mps": round(float(est.speed_spread), 3),
-            "v_mps": [round(float(v), 3) for v in est.twist.v],
-            "yaw_rate_dps": round(float(np.degrees(est.twist.w[2])), 3),
-            "observable_xyz": [bool(v) for v in est.observable],
-            "median_share_xyz": [round(float(v), 4) for v in np.median(est.share, axis=0)],
-            "time_offset_s": m.time_offset_s}
+        return frames, MotionReport(False, f"ego-motion estimate failed: {exc}")
     sweep = max(float(np.ptp(t)) for t in times)
-    info["skew_m"] = round(float(est.speed) * sweep, 3)
+    info = MotionReport(
+        False, speed_mps=round(float(est.speed), 3),
+        speed_spread_mps=round(float(est.speed_spread), 3),
+        v_mps=tuple(round(float(v), 3) for v in est.twist.v),
+        yaw_rate_dps=round(float(np.degrees(est.twist.w[2])), 3),
+        observable_xyz=tuple(bool(v) for v in est.observable),
+        median_share_xyz=tuple(round(float(v), 4) for v in np.median(est.share, axis=0)),
+        time_offset_s=m.time_offset_s, skew_m=round(float(est.speed) * sweep, 3))
     if not est.compensable:
         axes = "".join(a for a, ok in zip("xyz", est.observable) if not ok)
-        info.update(compensated=False,
-                    reason=f"ego-motion is not observable along {axes} (the scene does not "
-                           "constrain scan-to-scan registration there): not compensated")
-        return frames, info
+        return frames, dataclasses.replace(
+            info, reason=f"ego-motion is not observable along {axes} (the scene does not "
+                         "constrain scan-to-scan registration there): not compensated")
     out = list(frames)
     shift = 0.0
     for j, k in enumerate(order):
@@ -104,7 +159,7 @@ def compensate_motion(frames: list[Frame], settings: Settings) -> tuple[list[Fra
         pts = f.points.copy()
         pts[:, :3] = xyz
         out[k] = dataclasses.replace(f, points=np.ascontiguousarray(pts, dtype=np.float32))
-    info.update(compensated=True, max_shift_m=round(shift, 3))
+    info = dataclasses.replace(info, compensated=True, max_shift_m=round(shift, 3))
     log.info("de-skewed %d sweeps: %.2f m/s, largest shift %.2f m", len(frames), est.speed,
              shift)
     return out, info
@@ -262,7 +317,7 @@ class LidarSteps:
     frames: list[Frame]
     lidar_info: dict
     rings: list
-    motion_info: dict
+    motion_info: MotionReport
     settings_key: dict
 
     def for_camera(self, frames: list[Frame]) -> list[Frame]:

@@ -19,6 +19,7 @@ from .search import VARIABLES
 from .verdict import Evidence, Reliability, reliability
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .inputs import MotionReport
     from .wide import WideStart
 
 
@@ -70,8 +71,8 @@ class CalibrationResult:
     #: The verdict: ``"ok"`` or ``"unreliable"``, the reasons, the evidence (see
     #: :func:`reliability`).
     reliability: Reliability | None = None
-    #: What was done about motion during the sweeps (see :func:`compensate_motion`).
-    motion: dict | None = None
+    #: What was done about motion during the sweeps (:func:`paretocal.inputs.compensate_motion`).
+    motion: MotionReport | None = None
     #: What the input files offered: the point fields used, the camera model, notes.
     inputs: dict | None = None
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
@@ -147,7 +148,7 @@ class CalibrationResult:
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
             "quality": None if self.quality is None else self.quality.to_dict(),
-            "motion": self.motion,
+            "motion": None if self.motion is None else self.motion.to_dict(),
             "inputs": self.inputs,
             "wide_start": None if self.wide is None else self.wide.to_dict(),
             "reliability": (self.reliability if self.reliability is not None

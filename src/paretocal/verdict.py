@@ -1137,10 +1137,11 @@ def reliability(result: "CalibrationResult") -> Reliability:
             f"ambiguous: a pose {alt} away fits the frames about as well (paired test over "
             f"{basin.frames} frames: p = {p:.2g}); {where}; add frames with more varied "
             f"structure{narrower}")
-    mo = result.motion or {}
-    if not mo.get("compensated", True) and mo.get("skew_m", 0.0) > MAX_UNCOMPENSATED_SKEW_M:
-        reasons.append(f"the LiDAR moved {mo['skew_m']:.2g} m during a sweep and the motion "
-                       f"could not be compensated ({mo.get('reason')}): moving structure is "
+    mo = result.motion
+    if (mo is not None and not mo.compensated and mo.skew_m is not None
+            and mo.skew_m > MAX_UNCOMPENSATED_SKEW_M):
+        reasons.append(f"the LiDAR moved {mo.skew_m:.2g} m during a sweep and the motion "
+                       f"could not be compensated ({mo.reason}): moving structure is "
                        "misplaced by up to half that")
     rings = (result.feature_counts or {}).get("ring_recovery") or {}
     if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
