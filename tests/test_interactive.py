@@ -616,3 +616,46 @@ def test_importing_the_figures_leaves_matplotlib_alone(tmp_path):
             f"f.save_figure(fig, {str(tmp_path / 'x.png')!r})")
     subprocess.run([sys.executable, "-c", code], check=True)
     assert (tmp_path / "x.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_comparison_page_in_browser(tmp_path, raw_frames):
+    """``compare A B SOURCE --page``: every frame with its score at A and at B, the A / B
+    buttons change the projection, the layers work, no console error, no request."""
+    sync_playwright = _require_browser()
+    from paretocal.check import compare_extrinsics
+    from paretocal.config import Settings
+    from paretocal.geometry import apply_correction
+    from paretocal.report.interactive import write_comparison
+
+    frames = raw_frames[:4]
+    T = frames[0].T_ref
+    c = compare_extrinsics(T, apply_correction(T, [0.0, 0.0, 0.0, 2.0, 0.0, 0.0]), frames)
+    path = write_comparison(c, list(c.sweeps), Settings(), tmp_path / "compare.html")
+    data = _page_data(path.read_text(encoding="utf-8"))
+    assert data["plot"] is None and [s["caption"][0] for s in data["solutions"]] == ["A", "B"]
+    np.testing.assert_allclose([[v for v in row] for row in data["scores"]["solutions"]],
+                               c.frame_scores, rtol=1e-12)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS, headless=True)
+        try:
+            page, errors, failed, urls = _open(browser, path)
+            assert page.locator("#frames button").count() == 4
+            # B is shown first, with its scores; A moves the points and shows its own.
+            b = [f"{v:.3f}" for v in c.frame_scores[1]]
+            assert page.locator("#frames .score").all_text_contents() == b
+            page.evaluate(SNAP_JS, "b")
+            page.click("#view-a")
+            page.wait_for_function("document.getElementById('view-a').className === 'active'")
+            a = [f"{v:.3f}" for v in c.frame_scores[0]]
+            assert page.locator("#frames .score").all_text_contents() == a
+            page.evaluate(SNAP_JS, "a")
+            assert page.evaluate(DIFF_JS, ["a", "b"]) > 1000
+            page.click("#colour-intensity")
+            page.click("#layer-edges")
+            assert page.locator("#colour-groups").is_disabled()   # no calibration ran
+            assert "the frames prefer A" in page.locator("#verdict").text_content()
+            assert not errors, f"console errors: {errors}"
+            assert not failed and all(u.startswith(("file:", "data:")) for u in urls), urls
+            page.close()
+        finally:
+            browser.close()

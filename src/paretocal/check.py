@@ -12,7 +12,7 @@ one axis moved 0.9-1.1 deg or 7-10 cm (4.6-15.6 px), so 0.5 deg / 5 cm are the d
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -297,6 +297,9 @@ class Comparison:
         The preference in words.
     frames : tuple of str
         The frames compared on.
+    frame_scores : ndarray, shape (2, F), or None
+        The edge objective of each frame alone at A (row 0) and at B (row 1), with the points
+        A sees (px, lower is better; NaN for a frame with none); None without frames.
     """
 
     T_a: np.ndarray
@@ -310,6 +313,9 @@ class Comparison:
     prefer: str | None = None
     reason: str = ""
     frames: tuple = ()
+    frame_scores: np.ndarray | None = None
+    #: The frames as compared (de-skewed when the motion was compensated); not in JSON.
+    sweeps: tuple = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict:
         """The JSON form (``compare --out``): centimetres and degrees."""
@@ -373,6 +379,7 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
     cam = frames[0].camera
     lidar = prepare_lidar(frames, settings, [(cam, T_a), (cam, T_b)])
     prefs, pixels = [], []
+    scores = np.full((2, len(frames)), np.nan)
     for name, T_view in (("A", T_a), ("B", T_b)):
         stage = Stage(lidar.frames, T_view, T_view, settings,
                       None if progress is None else
@@ -386,6 +393,12 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
         prefs.append(Preference(name, ab["mean_px"], ab["se_px"], ab["p"], ba["p"],
                                 ab["frames"], ab["frames_far_better"]))
         pixels.append(displacement_px(obj, x[0], x[1]))
+        if name == "A":
+            per = np.asarray(obj.chamfer(x, ucb_k=0.0)["per_frame"], dtype=np.float64)
+            where = {n: k for k, n in enumerate(obj.scene.names)}
+            for j, f in enumerate(frames):
+                if f.name in where:
+                    scores[:, j] = per[:, where[f.name]]
     p_b = max(p.p_b for p in prefs)
     p_a = max(p.p_a for p in prefs)
     k = prefs[0].frames
@@ -402,7 +415,8 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
                   f"{prefs[0].mean_px:+.3f} px with A's points, {prefs[1].mean_px:+.3f} px "
                   f"with B's; p {min(p_a, p_b):.3g}, clear below {CLEAR_P:g})")
     return Comparison(**base, pixels=float(np.mean(pixels)), preferences=tuple(prefs),
-                      prefer=prefer, reason=reason, frames=tuple(f.name for f in frames))
+                      prefer=prefer, reason=reason, frames=tuple(f.name for f in frames),
+                      frame_scores=scores, sweeps=tuple(lidar.frames))
 
 
 def _prefer_text(who: str, prefs: list, p: float) -> str:

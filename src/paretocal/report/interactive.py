@@ -715,3 +715,138 @@ def write_interactive(result, frames: list[Frame], path: str | Path, frame: int 
                     len(frames), PAGE_BUDGET_BYTES / 1e6)
     atomic_write_text(path, page)
     return path
+
+
+# ------------------------------------------------------------------- two extrinsics compared
+
+
+def comparison_data(comparison, frames: list[Frame], settings, max_points: int = MIN_POINTS,
+                    budget_bytes: int = PAGE_BUDGET_BYTES) -> dict:
+    """What the page's script reads for two extrinsics compared on frames
+    (:func:`paretocal.check.compare_extrinsics`): the same frames, layers and zoom as a run's
+    page, with A and B as the two poses to switch between and no front.
+
+    Parameters
+    ----------
+    comparison : Comparison
+        With frames (``comparison.frame_scores`` gives each frame's score at A and B).
+    frames : list of Frame
+        The frames compared (``comparison.sweeps``: de-skewed when they were).
+    settings : Settings
+        The features' and objective's settings (the image edges, ``z_min``).
+    max_points : int
+        LiDAR returns embedded per frame at most.
+    budget_bytes : int
+        The page's size the images are fitted into (bytes).
+
+    Returns
+    -------
+    dict
+        The keys :func:`page_data` gives, with ``solutions`` A and B, ``chosen`` B, ``plot``
+        None and no feature points.
+    """
+    from ..features.prepare import frame_image_features
+
+    if not frames:
+        raise ValueError("the comparison page needs at least one frame")
+    z_min = float(settings.features.z_min)
+    T_a, T_b = (np.asarray(T, dtype=np.float64) for T in (comparison.T_a, comparison.T_b))
+    cameras: list[dict] = []
+    entries = []
+    for f in frames:
+        cam = _camera_entry(f.camera)
+        if cam not in cameras:
+            cameras.append(cam)
+        edges = edge_layer(frame_image_features(f, settings.features,
+                                                settings.objective).edges > 0)
+        pts = lidar_layer(f.points[:, :3], f.points[:, 3] if f.points.shape[1] > 3 else None,
+                          f.camera, [T_a, T_b], T_b, z_min, max_points)
+        entries.append({
+            "name": f.name, "camera": cameras.index(cam), "scene_index": None,
+            "edges": {"src": "data:image/png;base64," + _b64(edges["png"]),
+                      "count": edges["count"]},
+            "points": {"count": int(len(pts["xyz"])), "dtype": "int16", "layout": "xyz",
+                       "scale": pts["scale"], "xyz": _b64(pts["xyz"]),
+                       "intensity": _b64(pts["intensity"]),
+                       "intensity_range": list(pts["intensity_range"]),
+                       "depth_range": list(pts["depth_range"]), "in_view": pts["in_view"],
+                       "total": pts["total"]},
+            "image": None, "features": None})
+    sc = comparison.frame_scores
+    scores = None if sc is None else {
+        "solutions": [[_finite(v) for v in row] for row in sc], "initial": None,
+        "reference": None, "n": None}
+    d = comparison.to_dict()["correction"]
+    move = (f"x {d['x_cm']:+.2f} cm, y {d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw "
+            f"{d['yaw_deg']:+.3f} deg, pitch {d['pitch_deg']:+.3f} deg, roll "
+            f"{d['roll_deg']:+.3f} deg")
+    solutions = [{"T": T_a.tolist(), "n": None, "caption": "A"},
+                 {"T": T_b.tolist(), "n": None, "caption": f"B = A @ D ({move})"}]
+    data = {
+        "frames": entries, "start": 0, "cameras": cameras, "z_min": z_min, "scores": scores,
+        "chosen": 1, "T_init": T_a.tolist(), "T_ref": None, "solutions": solutions,
+        "plot": None, "captions": {"initial": "A", "reference": ""},
+        "lut": _depth_lut(), "lut_intensity": _lut("viridis"),
+        "groups": {"names": [g.replace("_", " ") for g in GROUP_NAMES],
+                   "colors": [list(c) for c in GROUP_COLORS]},
+        "edge_color": list(EDGE_COLOR), "depth_percentiles": list(DEPTH_PERCENTILES),
+        "intensity_percentiles": list(INTENSITY_PERCENTILES), "max_points": int(max_points)}
+    room = (budget_bytes - len(_json_script(data)) - 40_000) / len(frames) * 3 / 4
+    for f, e in zip(frames, entries):
+        im = image_layer(f.image, max(room, 0.0))
+        e["image"] = {"src": "data:image/jpeg;base64," + _b64(im["jpeg"]),
+                      "width": im["width"], "height": im["height"], "quality": im["quality"]}
+    return data
+
+
+def write_comparison(comparison, frames: list[Frame], settings, path: str | Path) -> Path:
+    """Write the page of two extrinsics compared on frames (``paretocal compare A B SOURCE
+    --page FILE``): every frame with its score at A and at B, the layers and the zoom of a
+    run's page, buttons for A and B, and the comparison's figures and preference.
+
+    Parameters
+    ----------
+    comparison : Comparison
+        :func:`paretocal.check.compare_extrinsics`'s, with frames.
+    frames : list of Frame
+        The frames compared (``comparison.sweeps``).
+    settings : Settings
+    path : str or Path
+        The output file, written atomically.
+
+    Returns
+    -------
+    Path
+    """
+    from .figures import data_credit
+
+    path = Path(path)
+    data = comparison_data(comparison, frames, settings)
+    c = comparison.to_dict()
+    rows = [("frames", f"{len(frames)} ({html.escape(frames[0].name)}"
+                       + (f" \u2026 {html.escape(frames[-1].name)})" if len(frames) > 1 else ")")),
+            ("B from A", html.escape(data["solutions"][1]["caption"][len("B = A @ D ("):-1])),
+            ("apart", f"{c['rotation_deg']:.3f} deg, {c['translation_cm']:.2f} cm"
+                      + ("" if c["pixels"] is None else f", {c['pixels']:.1f} px")),
+            ("the frames prefer", html.escape(str(comparison.prefer)))]
+    table = ('<table id="run-table">'
+             + "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows) + "</table>")
+    banner = f'<div id="verdict" class="verdict">{html.escape(comparison.reason)}</div>'
+    buttons = ('<button type="button" data-view="0" id="view-a">A</button>'
+               '<button type="button" data-view="1" id="view-b">B</button>')
+    f = frames[0]
+    page = Template(template("interactive.html")).substitute(
+        title=html.escape(f"paretocal: two extrinsics compared on {len(frames)} frame(s)"),
+        verdict=banner, run_table=table, buttons=buttons,
+        width=int(f.camera.width), height=int(f.camera.height),
+        scores_note=html.escape("Score: the edge objective of the frame alone at the "
+                                "extrinsic shown, with the points A sees (px, lower is "
+                                "better); the bar spans the best to the worst frame."),
+        points_note=html.escape(f"LiDAR: at most {data['max_points']} returns per frame (a "
+                                "random sample of those in view at A or B); no feature "
+                                "groups (no calibration ran)."),
+        credit=html.escape(data_credit(f)), css=template("interactive.css"),
+        js=template("front_plot.js") + template("interactive.js"),
+        data=_json_script(data))
+    atomic_write_text(path, page)
+    return path

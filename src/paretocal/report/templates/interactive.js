@@ -420,7 +420,8 @@
     btns[m].addEventListener("click", function (e) { show(e.currentTarget.getAttribute("data-view")); });
   }
   window.paretocal = {show: show, pick: pick, data: D, state: S, reset: resetZoom};
-  selectOnPlot = plotFront(document.getElementById("pareto"), D, function (i) { show(i); });
+  // A comparison of two extrinsics has no front to plot.
+  if (D.plot) selectOnPlot = plotFront(document.getElementById("pareto"), D, function (i) { show(i); });
   plotReady = true;
   show("chosen");
 })();
