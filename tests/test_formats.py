@@ -161,6 +161,21 @@ class TestPcd:
         np.testing.assert_array_equal(got[:, :3], sub[:, :3])
         np.testing.assert_array_equal(got[:, 3], inten.astype(np.float32))
 
+    def test_a_compressed_field_of_several_values_keeps_the_fields_after_it(self, tmp_path, pts):
+        """binary_compressed as PCL writes it: a field of COUNT 3 (normals) holds its three
+        values point by point inside its block; the fields after it read back exactly."""
+        sub = pts[::50]
+        n = len(sub)
+        normal = np.arange(3 * n, dtype=np.float32).reshape(n, 3)
+        raw = (b"".join(sub[:, j].astype("<f4").tobytes() for j in range(3))
+               + normal.astype("<f4").tobytes() + sub[:, 3].astype("<f4").tobytes())
+        packed = lzf.compress(raw)
+        head = ("VERSION 0.7\nFIELDS x y z normal intensity\nSIZE 4 4 4 4 4\nTYPE F F F F F\n"
+                f"COUNT 1 1 1 3 1\nWIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary_compressed\n")
+        p = tmp_path / "a.pcd"
+        p.write_bytes(head.encode() + np.array([len(packed), len(raw)], "<u4").tobytes() + packed)
+        np.testing.assert_array_equal(read_points(p), sub)
+
     def test_ascii_tolerates_tabs_trailing_blanks_and_header_comments(self, tmp_path):
         text = ("# .PCD v0.7\nVERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
                 "WIDTH 3\nHEIGHT 1\n# a comment\nPOINTS 3\nDATA ascii\n"

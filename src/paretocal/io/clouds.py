@@ -44,7 +44,6 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
 
 import numpy as np
 
@@ -641,8 +640,8 @@ def _pcd_int(path: Path, entries: dict[str, list[str]], key: str) -> int:
 def _read_pcd(path: Path, raw: bytes) -> dict[str, np.ndarray]:
     """The fields of a PCL point cloud file, in their declared types.
 
-    binary_compressed data is decoded by pypcd4. Fields with COUNT > 1 and padding (``_``) are
-    left out.
+    binary_compressed data is decoded by :func:`_pcd_compressed`. Fields with COUNT > 1 and
+    padding (``_``) are left out.
     """
     entries, offset = _pcd_header(path, raw)
     fields, types, sizes, counts = _pcd_fields(path, entries)
@@ -741,8 +740,11 @@ def _pcd_ascii(path: Path, body: bytes, names: list[str], formats: list[str],
 
 def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
                     counts: list[int], n: int) -> list[np.ndarray]:
-    """Decode binary_compressed data (LZF, field-major) with pypcd4; one array per value column."""
-    from pypcd4 import PointCloud
+    """Decode binary_compressed data: two size words, then LZF (python-neo-lzf, the codec
+    PCL's files use) of the values field by field, each field's values point by point (PCL's
+    layout: a field of COUNT c holds c values per point, together). One array per value
+    column, in the header's order."""
+    import lzf
 
     if len(body) < 8:
         raise InputError(f"{path}: PCD binary_compressed data is truncated (no size words)")
@@ -755,24 +757,22 @@ def _pcd_compressed(path: Path, body: bytes, types: list[str], sizes: list[int],
                          f"words say {packed} bytes compressed, {unpacked} uncompressed; the "
                          f"header needs {need} uncompressed and {len(body) - 8} bytes follow); "
                          "the file is truncated or corrupt")
-    # pypcd4 parses a fixed set of header lines: hand it a canonical header of the fields parsed
-    # here (plain names, so that padding fields called "_" keep their place).
-    k = len(types)
-    head = (f"FIELDS {' '.join(f'f{j}' for j in range(k))}\nSIZE {' '.join(map(str, sizes))}\n"
-            f"TYPE {' '.join(types)}\nCOUNT {' '.join(map(str, counts))}\nWIDTH {n}\nHEIGHT 1\n"
-            f"POINTS {n}\nDATA binary_compressed\n")
-    # pypcd4 annotates a BufferedReader, and reads any binary file object.
-    stream = cast(io.BufferedReader, io.BytesIO(head.encode() + body))
     try:
-        arr = PointCloud.from_fileobj(stream).pc_data
+        raw = lzf.decompress(body[8:8 + packed], unpacked)
     except Exception as exc:  # any decoder failure means a corrupt file
         raise InputError(f"{path}: PCD binary_compressed data cannot be decoded "
                          f"({first_line(exc)}); the file is truncated or corrupt") from None
-    names = arr.dtype.names
-    if arr.ndim != 1 or len(arr) != n or names is None or len(names) != sum(counts):
-        raise InputError(f"{path}: PCD binary_compressed data holds {arr.size} points, the header "
-                         f"says POINTS {n}")
-    return [arr[name] for name in names]
+    if raw is None or len(raw) != unpacked:
+        raise InputError(f"{path}: PCD binary_compressed data cannot be decoded (it expands to "
+                         f"{0 if raw is None else len(raw)} bytes, its size word says "
+                         f"{unpacked}); the file is truncated or corrupt")
+    out, offset = [], 0
+    for t, s, c in zip(types, sizes, counts):
+        values = np.frombuffer(raw, "<" + _PCD_TYPES[(t, s)], count=n * c,
+                               offset=offset).reshape(n, c)
+        out += [values[:, j] for j in range(c)]
+        offset += n * s * c
+    return out
 
 
 # --- PLY ------------------------------------------------------------------------------------------
