@@ -385,6 +385,45 @@ def _frame_edges(result, frame: Frame, scene_index: int | None) -> np.ndarray:
                                 result.settings.objective).edges > 0
 
 
+def _camera_index(cameras: list[dict], cam: Camera) -> int:
+    """The index of ``cam``'s entry in ``cameras``, appended when new."""
+    entry = _camera_entry(cam)
+    if entry not in cameras:
+        cameras.append(entry)
+    return cameras.index(entry)
+
+
+def _edges_entry(edges: np.ndarray) -> dict:
+    """A frame's ``edges`` (H, W) bool as the page embeds them."""
+    layer = edge_layer(edges)
+    return {"src": "data:image/png;base64," + _b64(layer["png"]), "count": layer["count"]}
+
+
+def _points_entry(pts: dict) -> dict:
+    """:func:`lidar_layer`'s output as the page embeds it (arrays base64)."""
+    return {"count": int(len(pts["xyz"])), "dtype": "int16", "layout": "xyz",
+            "scale": pts["scale"], "xyz": _b64(pts["xyz"]), "intensity": _b64(pts["intensity"]),
+            "intensity_range": list(pts["intensity_range"]),
+            "depth_range": list(pts["depth_range"]), "in_view": pts["in_view"],
+            "total": pts["total"]}
+
+
+def _image_entry(image: np.ndarray, max_bytes: float | None) -> dict:
+    """:func:`image_layer`'s JPEG as the page embeds it."""
+    im = image_layer(image, max_bytes)
+    return {"src": "data:image/jpeg;base64," + _b64(im["jpeg"]), "width": im["width"],
+            "height": im["height"], "quality": im["quality"]}
+
+
+def _colours() -> dict:
+    """The colour tables and scales every page shares."""
+    return {"lut": _depth_lut(), "lut_intensity": _lut("viridis"),
+            "groups": {"names": [g.replace("_", " ") for g in GROUP_NAMES],
+                       "colors": [list(c) for c in GROUP_COLORS]},
+            "edge_color": list(EDGE_COLOR), "depth_percentiles": list(DEPTH_PERCENTILES),
+            "intensity_percentiles": list(INTENSITY_PERCENTILES)}
+
+
 def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX_POINTS,
               max_feature_points: int = MAX_FEATURE_POINTS,
               budget_bytes: int | None = PAGE_BUDGET_BYTES, overhead_bytes: int = 0,
@@ -452,11 +491,7 @@ def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX
     cameras: list[dict] = []
     entries = []
     for f in frames:
-        cam = _camera_entry(f.camera)
-        if cam not in cameras:
-            cameras.append(cam)
         si = names.index(f.name) if f.name in names else None
-        edges = edge_layer(_frame_edges(result, f, si))
         feats = None
         if si is not None and objective is not None:
             sc = objective.scene
@@ -466,10 +501,8 @@ def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX
                      "xyz": _b64(fl["xyz"]), "group": _b64(fl["group"]),
                      "counts": fl["counts"], "total": fl["total"]}
         entries.append({
-            "name": f.name, "camera": cameras.index(cam), "scene_index": si,
-            "image": None,
-            "edges": {"src": "data:image/png;base64," + _b64(edges["png"]),
-                      "count": edges["count"]},
+            "name": f.name, "camera": _camera_index(cameras, f.camera), "scene_index": si,
+            "image": None, "edges": _edges_entry(_frame_edges(result, f, si)),
             "points": None, "features": feats})
 
     solutions = _solution_entries(result)
@@ -485,11 +518,7 @@ def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX
         "T_init": np.asarray(result.T_init, dtype=float).tolist(),
         "T_ref": None if result.T_ref is None else np.asarray(result.T_ref, dtype=float).tolist(),
         "solutions": solutions, "plot": _plot_spec(result, solutions),
-        "captions": captions, "lut": _depth_lut(), "lut_intensity": _lut("viridis"),
-        "groups": {"names": [g.replace("_", " ") for g in GROUP_NAMES],
-                   "colors": [list(c) for c in GROUP_COLORS]},
-        "edge_color": list(EDGE_COLOR), "depth_percentiles": list(DEPTH_PERCENTILES),
-        "intensity_percentiles": list(INTENSITY_PERCENTILES),
+        "captions": captions, **_colours(),
     }
     # What the edges, the feature points and the rest leave of the budget: the images at a
     # good quality first, then LiDAR returns, then the images take what is left.
@@ -505,12 +534,7 @@ def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX
     for f, e in zip(frames, entries):
         pts = lidar_layer(f.points[:, :3], f.points[:, 3] if f.points.shape[1] > 3 else None,
                           f.camera, views, T_chosen, z_min, n_points)
-        e["points"] = {"count": int(len(pts["xyz"])), "dtype": "int16", "layout": "xyz",
-                       "scale": pts["scale"], "xyz": _b64(pts["xyz"]),
-                       "intensity": _b64(pts["intensity"]),
-                       "intensity_range": list(pts["intensity_range"]),
-                       "depth_range": list(pts["depth_range"]), "in_view": pts["in_view"],
-                       "total": pts["total"]}
+        e["points"] = _points_entry(pts)
     data["max_points"] = n_points
     per_image = None
     if budget_bytes is not None:
@@ -519,9 +543,7 @@ def page_data(result, frames: list[Frame], frame: int = 0, max_points: int = MAX
                      '"quality":100}') - len("null")
         per_image = ((budget_bytes - rest) / len(frames) - prefix) * 3 / 4
     for f, e in zip(frames, entries):
-        im = image_layer(f.image, None if per_image is None else max(per_image, 0.0))
-        e["image"] = {"src": "data:image/jpeg;base64," + _b64(im["jpeg"]),
-                      "width": im["width"], "height": im["height"], "quality": im["quality"]}
+        e["image"] = _image_entry(f.image, None if per_image is None else max(per_image, 0.0))
     return data
 
 
@@ -754,24 +776,12 @@ def comparison_data(comparison, frames: list[Frame], settings, max_points: int =
     cameras: list[dict] = []
     entries = []
     for f in frames:
-        cam = _camera_entry(f.camera)
-        if cam not in cameras:
-            cameras.append(cam)
-        edges = edge_layer(frame_image_features(f, settings.features,
-                                                settings.objective).edges > 0)
+        edges = frame_image_features(f, settings.features, settings.objective).edges > 0
         pts = lidar_layer(f.points[:, :3], f.points[:, 3] if f.points.shape[1] > 3 else None,
                           f.camera, [T_a, T_b], T_b, z_min, max_points)
-        entries.append({
-            "name": f.name, "camera": cameras.index(cam), "scene_index": None,
-            "edges": {"src": "data:image/png;base64," + _b64(edges["png"]),
-                      "count": edges["count"]},
-            "points": {"count": int(len(pts["xyz"])), "dtype": "int16", "layout": "xyz",
-                       "scale": pts["scale"], "xyz": _b64(pts["xyz"]),
-                       "intensity": _b64(pts["intensity"]),
-                       "intensity_range": list(pts["intensity_range"]),
-                       "depth_range": list(pts["depth_range"]), "in_view": pts["in_view"],
-                       "total": pts["total"]},
-            "image": None, "features": None})
+        entries.append({"name": f.name, "camera": _camera_index(cameras, f.camera),
+                        "scene_index": None, "edges": _edges_entry(edges),
+                        "points": _points_entry(pts), "image": None, "features": None})
     sc = comparison.frame_scores
     scores = None if sc is None else {
         "solutions": [[_finite(v) for v in row] for row in sc], "initial": None,
@@ -785,17 +795,12 @@ def comparison_data(comparison, frames: list[Frame], settings, max_points: int =
     data = {
         "frames": entries, "start": 0, "cameras": cameras, "z_min": z_min, "scores": scores,
         "chosen": 1, "T_init": T_a.tolist(), "T_ref": None, "solutions": solutions,
-        "plot": None, "captions": {"initial": "A", "reference": ""},
-        "lut": _depth_lut(), "lut_intensity": _lut("viridis"),
-        "groups": {"names": [g.replace("_", " ") for g in GROUP_NAMES],
-                   "colors": [list(c) for c in GROUP_COLORS]},
-        "edge_color": list(EDGE_COLOR), "depth_percentiles": list(DEPTH_PERCENTILES),
-        "intensity_percentiles": list(INTENSITY_PERCENTILES), "max_points": int(max_points)}
+        "plot": None, "captions": {"initial": "A", "reference": ""}, **_colours(),
+        "max_points": int(max_points)}
+    # The images take what the rest leaves (40 kB: the page around the data).
     room = (budget_bytes - len(_json_script(data)) - 40_000) / len(frames) * 3 / 4
     for f, e in zip(frames, entries):
-        im = image_layer(f.image, max(room, 0.0))
-        e["image"] = {"src": "data:image/jpeg;base64," + _b64(im["jpeg"]),
-                      "width": im["width"], "height": im["height"], "quality": im["quality"]}
+        e["image"] = _image_entry(f.image, max(room, 0.0))
     return data
 
 
