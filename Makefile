@@ -1,4 +1,5 @@
 # paretocal: one command for the demo, one for the tests. Each creates .venv when missing.
+# `make docs` builds the documentation site into site/ (open site/index.html).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -7,7 +8,7 @@ RUN    ?= runs/demo
 # The start is written beside the run folder: --out refuses a folder holding other files.
 INIT   ?= $(RUN)_init.yaml
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean docs
 
 $(BIN)/paretocal: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,7 +26,12 @@ test: $(BIN)/paretocal
 	PARETOCAL_DATA=$(DATA) $(BIN)/python -m pytest
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs .pytest_cache site
+
+# The site from docs/ and the docstrings (mkdocs.yml); every warning is an error.
+# NO_MKDOCS_2_WARNING silences Material's notice about MkDocs 2, which is not a build warning.
+docs: $(BIN)/paretocal
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict -d site
 
 bench: $(BIN)/paretocal
 	PARETOCAL_DATA=$(DATA) $(BIN)/python benchmarks/speed.py --png runs/speed_scaling.png

@@ -216,7 +216,18 @@ class Camera:
 
     def mounted(self, T_cam_lidar: np.ndarray) -> np.ndarray:
         """The extrinsic(s) this camera projects with: ``mount @ T_cam_lidar`` for any batch
-        (..., 4, 4) or (..., 3, 4) (``T_cam_lidar`` itself without a mount)."""
+        (..., 4, 4) or (..., 3, 4) (``T_cam_lidar`` itself without a mount).
+
+        Parameters
+        ----------
+        T_cam_lidar : ndarray, shape (..., 4, 4) or (..., 3, 4)
+            Extrinsics (LiDAR -> the camera the mount is relative to; m).
+
+        Returns
+        -------
+        ndarray
+            The extrinsics of this camera, of ``T_cam_lidar``'s shape.
+        """
         return T_cam_lidar if self.mount is None else compose_mount(self.mount, T_cam_lidar)
 
     # --- projection --------------------------------------------------------------------------
@@ -579,7 +590,20 @@ def project(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
 
 def compose_mount(mount: np.ndarray, T: np.ndarray) -> np.ndarray:
     """``mount @ T`` for a (4, 4) ``mount`` and any batch ``T`` (..., 4, 4) or (..., 3, 4);
-    the result has ``T``'s shape."""
+    the result has ``T``'s shape.
+
+    Parameters
+    ----------
+    mount : ndarray, shape (4, 4)
+        A camera's pose relative to another camera of the rig (m).
+    T : array_like, shape (..., 4, 4) or (..., 3, 4)
+        Extrinsics of that other camera (m).
+
+    Returns
+    -------
+    ndarray, float64
+        ``mount @ T``, of ``T``'s shape.
+    """
     T = np.asarray(T, dtype=np.float64)
     out = T.copy()
     out[..., :3, :3] = mount[:3, :3] @ T[..., :3, :3]
@@ -588,7 +612,21 @@ def compose_mount(mount: np.ndarray, T: np.ndarray) -> np.ndarray:
 
 
 def in_image(uv: np.ndarray, width: int, height: int, margin: float = 0.0) -> np.ndarray:
-    """Mask of pixel coordinates (..., 2) inside the image grown by ``margin`` pixels (NaN: no)."""
+    """Mask of pixel coordinates (..., 2) inside the image grown by ``margin`` pixels (NaN: no).
+
+    Parameters
+    ----------
+    uv : ndarray, shape (..., 2)
+        Pixel coordinates (u, v) (docs/conventions.md section 1); NaN for invalid points.
+    width, height : int
+        The image's size (px).
+    margin : float
+        Pixels by which the image is grown on every side.
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
     u, v = uv[..., 0], uv[..., 1]
     with np.errstate(invalid="ignore"):
         return ((u >= -margin) & (u <= width - 1 + margin)

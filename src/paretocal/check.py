@@ -139,7 +139,14 @@ class CheckReport:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "CheckReport":
-        """The report read back from its :meth:`to_dict` form."""
+        """The report read back from its :meth:`to_dict` form.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         tol, step, moved = doc["tolerances"], doc["neighbour_step"], doc["moved"]
         return cls(verdict=str(doc["verdict"]), score=float(doc["score"]),
                    notes=tuple(str(n) for n in doc.get("notes") or []),
@@ -158,7 +165,17 @@ class CheckReport:
                    extrinsic_from=doc.get("extrinsic_from"))
 
     def with_source(self, extrinsic_from: str) -> "CheckReport":
-        """The report naming where the extrinsic checked came from."""
+        """The report naming where the extrinsic checked came from.
+
+        Parameters
+        ----------
+        extrinsic_from : str
+            Its file, or ``"dataset"``.
+
+        Returns
+        -------
+        CheckReport
+        """
         return dataclasses.replace(self, extrinsic_from=extrinsic_from)
 
 
@@ -167,8 +184,21 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
                     progress=None) -> CheckReport:
     """Check ``T`` (4, 4) on ``frames``.
 
-    ``progress(stage, done, total)``, if given, is told of the feature extraction per frame
-    and of the three steps after it (neighbours, local optimum, quality report).
+    Parameters
+    ----------
+    frames : list of Frame
+        The frames (:func:`paretocal.load_frames`); at least 3 for a check that is not weak.
+    T : ndarray, shape (4, 4)
+        The extrinsic ``T_cam_lidar`` to check (m).
+    settings : Settings, optional
+        The settings of the objective (defaults when omitted).
+    rot_tol_deg : float
+        Rotation tolerance (deg) of the move to the local optimum.
+    trans_tol_cm : float
+        Translation tolerance (cm) of the move to the local optimum.
+    progress : callable, optional
+        ``progress(stage, done, total)``, told of the feature extraction per frame and of the
+        three steps after it (neighbours, local optimum, quality report).
 
     Returns
     -------
@@ -260,6 +290,7 @@ class Preference:
     frames_b_better: int
 
     def to_dict(self) -> dict:
+        """The JSON form (``compare --out``), rounded."""
         return {"view": self.view, "mean_px": _num(self.mean_px, 4),
                 "se_px": _num(self.se_px, 4), "p_b": _num(self.p_b, 6),
                 "p_a": _num(self.p_a, 6), "frames": self.frames,

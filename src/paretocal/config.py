@@ -148,7 +148,28 @@ class MotionSettings:
 
 @dataclass(frozen=True)
 class Settings:
-    """All settings of one calibration run."""
+    """All settings of one calibration run.
+
+    Every section is a frozen dataclass; a ``--config`` file gives them by section name
+    (``search: {pop: 1000, gens: 200}``).
+
+    Attributes
+    ----------
+    features : FeatureSettings
+        Image and LiDAR feature extraction.
+    objective : ObjectiveSettings
+        The two objectives.
+    search : SearchSettings
+        NSGA-II, its box (the stated initial error, m and deg) and the seeding.
+    decision : DecisionSettings
+        How one solution is chosen from the front; the polish and the verdict's restarts.
+    motion : MotionSettings
+        De-skewing clouds recorded while moving.
+    camera : int
+        KITTI camera index 0-3 (2, the left colour camera).
+    frames : str or None
+        The frames' selection (``"0:20"``, ``"0,3,7"`` or stems); None: every frame.
+    """
 
     features: FeatureSettings = field(default_factory=FeatureSettings)
     objective: ObjectiveSettings = field(default_factory=ObjectiveSettings)
@@ -165,6 +186,23 @@ class Settings:
         ``keep_none``: then ``None`` is a value like any other, for the fields that allow it
         (``seed_grid_deg: null`` turns the seed grid off). Configuration files, saved runs and
         batch workers read settings with ``keep_none`` (see :func:`settings_from_mapping`).
+
+        Parameters
+        ----------
+        keep_none : bool
+            ``None`` is a value like any other.
+        **sections : dict
+            By section name (``features``, ``objective``, ``search``, ``decision``,
+            ``motion``), the fields to replace, e.g. ``search={"pop": 300, "seed": 0}``.
+
+        Returns
+        -------
+        Settings
+
+        Raises
+        ------
+        SettingsError
+            An unknown section or field, or a value of the wrong type.
         """
         out = self
         for name, values in sections.items():
@@ -195,6 +233,7 @@ class Settings:
         return math.sqrt(2.0 * math.log(max(self.search.pop * self.search.gens, 2)))
 
     def to_dict(self) -> dict[str, Any]:
+        """Every setting by section, as ``result.json``'s ``config`` holds it."""
         return dataclasses.asdict(self)
 
     def validate(self) -> "Settings":
@@ -487,7 +526,19 @@ def states_init_error(path: str | Path | None) -> bool:
 
 
 def load_settings(path: str | Path | None, base: Settings | None = None) -> Settings:
-    """Settings from a YAML/JSON config file laid out by section, over ``base``."""
+    """Settings from a YAML/JSON config file laid out by section, over ``base``.
+
+    Parameters
+    ----------
+    path : str or Path or None
+        The file (``search: {pop: 1000, gens: 200}``); None: ``base`` itself.
+    base : Settings, optional
+        The settings the file's values replace (the defaults when omitted).
+
+    Returns
+    -------
+    Settings
+    """
     from .io.text import read_mapping
 
     if path is None:

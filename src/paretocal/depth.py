@@ -30,7 +30,9 @@ def depth_map(points: np.ndarray, camera: Camera, T_cam_lidar: np.ndarray,
     points : ndarray, shape (N, 3) or (N, 4)
         LiDAR returns (metres; a fourth column is ignored).
     camera : Camera
+        The camera's model, intrinsics and size.
     T_cam_lidar : ndarray, shape (4, 4)
+        The extrinsic (LiDAR -> camera, m).
     z_min : float
         Returns closer than this in front of the camera are ignored (metres); so are returns
         a wide-angle model sees behind the image plane (no positive depth).
@@ -96,7 +98,26 @@ def depth_overlay(image: np.ndarray, depth: np.ndarray, max_depth: float = 50.0,
 def write_depth(frame, T_cam_lidar: np.ndarray, out_dir: str | Path, z_min: float = 0.1,
                 max_depth: float = 50.0) -> list[Path]:
     """Write ``<stem>.png`` (KITTI 16-bit), ``<stem>.npy`` (float32 metres) and
-    ``<stem>_overlay.png`` for one frame into ``out_dir``; returns the paths."""
+    ``<stem>_overlay.png`` for one frame into ``out_dir``; returns the paths.
+
+    Parameters
+    ----------
+    frame : Frame
+        The frame (:func:`paretocal.load_frames`): its image, cloud, camera and mask.
+    T_cam_lidar : ndarray, shape (4, 4)
+        The extrinsic (LiDAR -> camera, m).
+    out_dir : str or Path
+        The folder to write into (made when missing).
+    z_min : float
+        Returns closer than this in front of the camera are ignored (m).
+    max_depth : float
+        The far end of the overlay's colour scale (m).
+
+    Returns
+    -------
+    list of Path
+        The three files written.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = depth_map(frame.points, frame.camera, T_cam_lidar, z_min, getattr(frame, "mask", None))

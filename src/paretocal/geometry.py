@@ -57,6 +57,16 @@ def euler_zyx(R: np.ndarray) -> np.ndarray:
 
     Pitch is taken in [-90, 90] degrees.
 
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation matrices.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Yaw, pitch and roll in degrees.
+
     Examples
     --------
     >>> import numpy as np
@@ -104,18 +114,52 @@ def correction_matrix(params: np.ndarray) -> np.ndarray:
 
 
 def correction_params(D: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`correction_matrix`: ``(x, y, z, yaw, pitch, roll)``, shape (..., 6)."""
+    """Inverse of :func:`correction_matrix`: ``(x, y, z, yaw, pitch, roll)``, shape (..., 6).
+
+    Parameters
+    ----------
+    D : array_like, shape (..., 4, 4)
+        Corrections (rigid transforms in the LiDAR frame).
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+        Translation in metres, then yaw, pitch and roll in degrees.
+    """
     D = np.asarray(D, dtype=np.float64)
     return np.concatenate([D[..., :3, 3], euler_zyx(D[..., :3, :3])], axis=-1)
 
 
 def apply_correction(T_init: np.ndarray, params: np.ndarray) -> np.ndarray:
-    """``T_init @ D(params)`` for a batch of corrections, shape (..., 4, 4)."""
+    """``T_init @ D(params)`` for a batch of corrections, shape (..., 4, 4).
+
+    Parameters
+    ----------
+    T_init : array_like, shape (4, 4)
+        The initial extrinsic ``T_cam_lidar`` (m).
+    params : array_like, shape (..., 6) or more columns
+        Corrections ``(x, y, z, yaw, pitch, roll)`` in metres and degrees, applied in the LiDAR
+        frame; columns beyond the sixth (such as ``n``) are ignored.
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+        The corrected extrinsics.
+    """
     return np.asarray(T_init, dtype=np.float64) @ correction_matrix(params)
 
 
 def invert(T: np.ndarray) -> np.ndarray:
     """Inverse of rigid transforms, shape (..., 4, 4).
+
+    Parameters
+    ----------
+    T : array_like, shape (..., 4, 4)
+        Rigid transforms (rotation and translation in metres).
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
 
     Examples
     --------
@@ -166,7 +210,18 @@ def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
-    """Angle of rotation matrices in degrees, shape (...). Stable near 0 and 180 degrees."""
+    """Angle of rotation matrices in degrees, shape (...). Stable near 0 and 180 degrees.
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        Rotation matrices.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        The angle of each rotation about its axis, in degrees, in [0, 180].
+    """
     R = np.asarray(R, dtype=np.float64)
     # atan2(|axis * sin|, cos) is accurate near zero, where arccos((tr - 1) / 2) is not.
     s = 0.5 * np.linalg.norm(np.stack([R[..., 2, 1] - R[..., 1, 2],
@@ -182,7 +237,9 @@ def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> dict[str, np.ndarray]:
     Parameters
     ----------
     T_est : array_like, shape (..., 4, 4)
+        Estimated extrinsics ``T_cam_lidar`` (m).
     T_ref : array_like, shape (4, 4)
+        The reference ``T_cam_lidar`` (m).
 
     Returns
     -------
@@ -230,6 +287,24 @@ def check_rigid(T, name: str, tol: float = 1e-4, key: str = "T_cam_lidar",
     Raises :class:`InputError` naming the file ``name`` and the matrix ``key`` when the shape
     is wrong, values are not finite, the bottom row is not ``[0, 0, 0, 1]`` or the rotation
     block is not a proper rotation. A 3x4 matrix gets the bottom row added.
+
+    Parameters
+    ----------
+    T : array_like, shape (4, 4) or (3, 4)
+        The matrix as read (nested lists or an array; translation in metres).
+    name : str
+        The file it came from, for the error message.
+    tol : float
+        Largest ``|R^T R - I|`` accepted for the rotation block.
+    key : str
+        The matrix's name in the file, for the error message.
+    orthonormalise : bool
+        Return the rotation block re-orthonormalised (by SVD), so that the 6-7 significant
+        digits of a file do not accumulate.
+
+    Returns
+    -------
+    ndarray, shape (4, 4), float64
     """
     try:
         T = np.array(T, dtype=np.float64)
@@ -270,10 +345,23 @@ def decalibrate(T_ref: np.ndarray, rot_deg: float, trans_m: float,
     ``T_init = T_ref @ D(p)^-1``, so the correction a calibration has to find, ``p``, lies in
     the box (the convention of ``paretocal perturb`` and the benchmarks).
 
+    Parameters
+    ----------
+    T_ref : array_like, shape (4, 4)
+        The extrinsic to decalibrate (``T_cam_lidar``, m).
+    rot_deg : float
+        Largest rotation per axis (deg).
+    trans_m : float
+        Largest translation per axis (m).
+    rng : numpy.random.Generator or int or None
+        The random generator, or a seed for one.
+
     Returns
     -------
     T_init : ndarray, shape (4, 4)
+        The decalibrated extrinsic.
     p : ndarray, shape (6,)
+        The correction from ``T_init`` to ``T_ref`` (m, deg): ``T_ref = T_init @ D(p)``.
     """
     rng = np.random.default_rng(rng)
     p = np.concatenate([rng.uniform(-trans_m, trans_m, 3), rng.uniform(-rot_deg, rot_deg, 3)])

@@ -39,7 +39,20 @@ def cm_written(m: float, digits: int) -> float:
 
     A record holding a figure result.json writes in cm rounded to ``digits`` holds that
     figure / 100; this gives the written figure back exactly (``m * 100`` alone can miss it
-    in the last bit, and rounding again to the same digits recovers it)."""
+    in the last bit, and rounding again to the same digits recovers it).
+
+    Parameters
+    ----------
+    m : float
+        A length in metres.
+    digits : int
+        The decimals of the figure written in cm.
+
+    Returns
+    -------
+    float
+        The length in cm.
+    """
     return round(float(m) * 100.0, digits)
 
 #: Finite-difference step of the run's quality report, in pixels: each axis is stepped by the
@@ -102,7 +115,19 @@ def _jackknife_se(per_frame: np.ndarray, H: np.ndarray, h: np.ndarray) -> np.nda
 
 def at_every_point(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """A copy of the solution ``x`` (7,) (or solutions (k, 7)) with ``n`` set to every feature
-    point of the frames."""
+    point of the frames.
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective whose frames count.
+    x : array_like, shape (7,) or (k, 7)
+        Solutions ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+
+    Returns
+    -------
+    ndarray, of ``x``'s shape
+    """
     x = np.array(x, dtype=np.float64, copy=True)
     x[..., 6] = int(objective.scene.points_per_frame.max())
     return x
@@ -176,7 +201,13 @@ class Quality:
     @classmethod
     def from_dict(cls, doc: dict) -> "Quality":
         """The report read back from its :meth:`to_dict` form (``result.json``'s
-        ``quality``); a key it lacks reads as NaN (False for ``well_observed``)."""
+        ``quality``); a key it lacks reads as NaN (False for ``well_observed``).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (cm and deg).
+        """
         def si(key):
             v = doc.get(key) or {}
             return np.array([v.get(a, np.nan) for a in AXES], dtype=np.float64) / TO_REPORT
@@ -237,7 +268,19 @@ def quality_report(objective: AlignmentObjective, x: np.ndarray, h: np.ndarray =
 def axis_resolution(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """Per-axis change (m, m, m, deg, deg, deg) that moves the projected feature points by one
     pixel on average at ``x`` (7,), the other axes held; inf for an axis that does not move
-    them."""
+    them.
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective whose frames and feature points count.
+    x : ndarray, shape (7,)
+        The solution ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+
+    Returns
+    -------
+    ndarray, shape (6,)
+    """
     probe = np.r_[[0.01] * 3, [0.1] * 3]
     out = np.empty(6)
     for a in range(6):
@@ -251,14 +294,43 @@ def axis_resolution(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
 def pixel_fd_step(objective: AlignmentObjective, x: np.ndarray) -> np.ndarray:
     """Finite-difference steps (6,) in m and deg for the quality report at ``x`` (7,): the
     change of each axis that moves the points by :data:`FD_STEP_PX` pixels, at most
-    :data:`MAX_FD_STEP`."""
+    :data:`MAX_FD_STEP`.
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective whose frames and feature points count.
+    x : ndarray, shape (7,)
+        The solution ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+
+    Returns
+    -------
+    ndarray, shape (6,)
+    """
     return np.minimum(FD_STEP_PX * axis_resolution(objective, x), MAX_FD_STEP)
 
 
 def neighbour_fraction(objective: AlignmentObjective, x: np.ndarray,
                        delta: np.ndarray) -> tuple[float, float]:
     """Levinson & Thrun's test: the share of the 3^6 - 1 grid neighbours of ``x`` (steps
-    ``delta``, m and deg) that score lower than ``x`` itself, and the best improvement (px)."""
+    ``delta``, m and deg) that score lower than ``x`` itself, and the best improvement (px).
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective (read without the sampling-error charge).
+    x : ndarray, shape (7,)
+        The solution ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    delta : ndarray, shape (6,)
+        The grid's step per axis (m, deg).
+
+    Returns
+    -------
+    fraction : float
+        The share of neighbours scoring lower, in [0, 1].
+    gain_px : float
+        The best neighbour's improvement (px; 0 when none is better).
+    """
     grid = np.stack(np.meshgrid(*[[-1.0, 0.0, 1.0]] * 6, indexing="ij"), -1).reshape(-1, 6)
     grid = grid[np.any(grid != 0, axis=1)]
     cand = np.tile(x, (len(grid) + 1, 1))
@@ -272,7 +344,22 @@ def local_optimum(objective: AlignmentObjective, x: np.ndarray, iters: int = 15)
     """Polish ``x`` (7,) at every point, no sampling-error charge; returns the optimum (7,).
 
     ``x`` (k, 7): the k solutions are polished together (one objective call per step for all:
-    the same optima as one by one, in less time), returning (k, 7)."""
+    the same optima as one by one, in less time), returning (k, 7).
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective.
+    x : ndarray, shape (7,) or (k, 7)
+        Solutions ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    iters : int
+        Newton iterations before the compass search.
+
+    Returns
+    -------
+    ndarray, of ``x``'s shape
+        The local optima, ``n`` at every point.
+    """
     from .search.polish import newton_polish, polish
 
     x = at_every_point(objective, x)
@@ -285,7 +372,24 @@ def local_optimum(objective: AlignmentObjective, x: np.ndarray, iters: int = 15)
 def displacement_px(objective: AlignmentObjective, x: np.ndarray, y: np.ndarray, frames=None):
     """Mean pixel distance between the feature points' projections under pose x (7,) and
     pose y (7,) (a float), or each of poses y (k, 7) (an array (k,)), over every frame or
-    the frames of index ``frames``."""
+    the frames of index ``frames``.
+
+    Parameters
+    ----------
+    objective : AlignmentObjective
+        The objective whose frames and feature points count.
+    x : ndarray, shape (7,)
+        The pose compared with (m, deg, points per frame).
+    y : ndarray, shape (7,) or (k, 7)
+        The pose or poses compared.
+    frames : sequence of int, optional
+        The frames' indices; every frame when omitted.
+
+    Returns
+    -------
+    float or ndarray, shape (k,)
+        The mean displacement (px).
+    """
     from .decide import reprojection_deviation
 
     sc = objective.scene
@@ -298,7 +402,18 @@ def displacement_px(objective: AlignmentObjective, x: np.ndarray, y: np.ndarray,
 
 
 def correction_between(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
-    """The correction D with ``T_to = T_from @ D``, as (x, y, z, yaw, pitch, roll)."""
+    """The correction D with ``T_to = T_from @ D``, as (x, y, z, yaw, pitch, roll).
+
+    Parameters
+    ----------
+    T_from, T_to : ndarray, shape (..., 4, 4)
+        Extrinsics ``T_cam_lidar`` (m).
+
+    Returns
+    -------
+    ndarray, shape (..., 6)
+        Metres and degrees, in ``T_from``'s LiDAR frame.
+    """
     from .geometry import correction_params, invert
 
     return correction_params(invert(T_from) @ T_to)

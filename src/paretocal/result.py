@@ -48,7 +48,65 @@ class Front:
 
 @dataclass
 class CalibrationResult:
-    """Everything a calibration run produced (see :func:`calibrate`)."""
+    """Everything a calibration run produced (see :func:`calibrate`).
+
+    Lengths are in metres and angles in degrees (``result.json``, :meth:`to_dict`, writes
+    some of them in cm).
+
+    Attributes
+    ----------
+    T_cam_lidar : ndarray, shape (4, 4)
+        The chosen extrinsic (LiDAR -> camera).
+    T_init : ndarray, shape (4, 4)
+        The initial extrinsic (after a wide start: the start it found).
+    T_ref : ndarray, shape (4, 4) or None
+        The dataset's reference extrinsic, when ``--init`` gave another start.
+    chosen : int
+        The chosen solution's index in ``front``.
+    front : Front
+        The final Pareto front: ``X`` (k, 7), ``F`` (k, 2), ``T`` (k, 4, 4), per-solution
+        columns.
+    decision : Decision
+        How the solution was chosen.
+    cost_model : CostModel
+        The affine cost model of this machine (CPU ms and bytes per evaluation).
+    settings : Settings
+        The settings used.
+    evaluations : int
+        Objective evaluations spent.
+    wall_s : float
+        Wall time of the run (s).
+    timings : dict
+        Wall time per phase (s).
+    frames : list of str
+        The frames' names.
+    feature_counts : dict
+        The feature points per group and frame, and the frames that contribute.
+    n_range : tuple of int
+        ``(n_min, n_max)``, the searched range of points per frame.
+    history : list
+        Per NSGA-II generation: the best f1 and the front's size.
+    nsga_front : tuple or None
+        ``(X, F)`` of the NSGA-II front before the polish.
+    quality : Quality or None
+        The quality report at the result.
+    reliability : Reliability or None
+        The verdict: ``"ok"`` or ``"unreliable"``, the reasons, the evidence.
+    motion : dict or None
+        What was done about motion during the sweeps.
+    inputs : dict or None
+        What the input files offered: the point fields used, the camera model, notes.
+    evidence : Evidence or None
+        The verdict's own checks (restart, image-cloud agreement, per-axis intervals).
+    wide : dict or None
+        What the wide start did; None when the stated error did not ask for it.
+    sweeps : list or None
+        The frames as calibrated (de-skewed when the motion was compensated).
+    objective : CalibrationObjective or None
+        The final objective (feature points chosen at the estimate).
+    seed_poses : ndarray, shape (k, 6) or None
+        The search's grid seeds (m, deg).
+    """
 
     T_cam_lidar: np.ndarray
     T_init: np.ndarray
@@ -113,6 +171,9 @@ class CalibrationResult:
         return {k: float(v) for k, v in pose_error(T, self.T_ref).items()}
 
     def objectives(self) -> dict[str, float]:
+        """The chosen solution's objectives and their parts: ``chamfer`` (f1, px), ``cost``
+        (f2), and those of its front columns that are known (``ms``, ``bytes``, ``in_view``,
+        ``deviation_px``, ...), as ``result.json`` writes them."""
         i, c = self.chosen, self.front.columns
         out = {"chamfer": float(self.front.F[i, 0]), "cost": float(self.front.F[i, 1])}
         for k in ("chamfer_holdout", "deviation_px", "t_norm", "m_norm", "ms", "bytes", "edge_px",

@@ -438,7 +438,21 @@ def _rig_camera_of(run_args: Path) -> str | None:
 def resume_run(run_dir: str | Path, checkpoint_every: int = 5,
                progress=None) -> CalibrationResult:
     """Continue the run in ``run_dir`` from its checkpoint (from the start when there is
-    none), with the arguments it recorded; the same result as the uninterrupted run."""
+    none), with the arguments it recorded; the same result as the uninterrupted run.
+
+    Parameters
+    ----------
+    run_dir : str or Path
+        The run folder of an interrupted :func:`calibrate_run` (``paretocal calibrate --out``).
+    checkpoint_every : int
+        Generations between checkpoints; 0 for none.
+    progress : callable, optional
+        As for :func:`paretocal.calibrate`.
+
+    Returns
+    -------
+    CalibrationResult
+    """
     args = run_arguments(run_dir)
     if not os.path.lexists(Path(run_dir) / CHECKPOINT):
         log.warning("%s: no checkpoint; the run starts over", run_dir)

@@ -191,7 +191,14 @@ class RestartRun:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "RestartRun":
-        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False)."""
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         return cls(separation_deg=_nan(doc.get("separation_deg")),
                    separation_m=_nan(doc.get("separation_cm")) / 100.0,
                    separation_px=_nan(doc.get("separation_px")),
@@ -231,6 +238,14 @@ class RestartCheck:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "RestartCheck":
+        """Read back from :meth:`to_dict`'s form.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         return cls(runs=tuple(RestartRun.from_dict(r) for r in doc.get("runs") or []),
                    disagrees=bool(doc.get("disagrees", False)),
                    evaluations=int(doc.get("evaluations", 0)))
@@ -275,7 +290,14 @@ class Contrast:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "Contrast":
-        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN."""
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         ratio = doc.get("group_ratio") or {}
         return cls(poses=int(doc.get("poses", 0)), margin_px=_nan(doc.get("margin_px")),
                    z=_nan(doc.get("z")), frames_clear=_nan(doc.get("frames_clear")),
@@ -323,7 +345,14 @@ class StartComparison:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "StartComparison":
-        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False)."""
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN (0, False).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         return cls(separation_deg=_nan(doc.get("separation_deg")),
                    separation_m=_nan(doc.get("separation_cm")) / 100.0,
                    mean_px=_nan(doc.get("mean_px")), frames=int(doc.get("frames", 0)),
@@ -382,7 +411,14 @@ class CameraCheck:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "CameraCheck":
-        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN."""
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         agrees = doc.get("agrees")
         return cls(name=str(doc.get("name", "")), frames=int(doc.get("frames", 0)),
                    checked=bool(doc.get("checked", False)),
@@ -408,11 +444,20 @@ class CameraAgreement:
     disagreeing: tuple[str, ...]
 
     def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it."""
         return {"cameras": [c.to_dict() for c in self.cameras],
                 "disagreeing": list(self.disagreeing)}
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "CameraAgreement":
+        """Read back from :meth:`to_dict`'s form.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         return cls(cameras=tuple(CameraCheck.from_dict(c) for c in doc.get("cameras") or []),
                    disagreeing=tuple(str(n) for n in doc.get("disagreeing") or []))
 
@@ -487,7 +532,14 @@ class Intervals:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "Intervals":
         """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN, an axis
-        without ``determined`` as determined unless ``undetermined`` names it."""
+        without ``determined`` as determined unless ``undetermined`` names it.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         undetermined = set(doc.get("undetermined") or [])
         det = doc.get("determined") or {}
         samp, res = doc.get("sampling_px"), doc.get("resolution_per_px")
@@ -526,8 +578,17 @@ class Evidence:
     cameras: CameraAgreement | None = None
 
     def to_dict(self, intervals: bool = True) -> dict[str, Any]:
-        """As ``result.json`` writes it, the parts gathered by name (``intervals`` False:
-        without the intervals, as the verdict's ``evidence`` writes it)."""
+        """As ``result.json`` writes it, the parts gathered by name.
+
+        Parameters
+        ----------
+        intervals : bool
+            False: without the intervals, as the verdict's ``evidence`` writes it.
+
+        Returns
+        -------
+        dict
+        """
         parts = {"contrast": self.contrast, "start": self.start,
                  "intervals": self.intervals if intervals else None,
                  "restart": self.restart, "cameras": self.cameras}
@@ -535,7 +596,14 @@ class Evidence:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "Evidence":
-        """Read back from :meth:`to_dict`'s form (a part it lacks: None)."""
+        """Read back from :meth:`to_dict`'s form (a part it lacks: None).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         def part(key, kind):
             v = doc.get(key)
             return None if v is None else kind.from_dict(v)
@@ -629,7 +697,14 @@ class Reliability:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> "Reliability":
-        """Read back from :meth:`to_dict`'s form (``result.json``'s ``reliability``)."""
+        """Read back from :meth:`to_dict`'s form (``result.json``'s ``reliability``).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
         iv = doc.get("intervals") or doc.get("intervals_not_trusted")
         parts = dict(doc.get("evidence") or {})
         if iv is not None:
@@ -709,7 +784,26 @@ def restart_evidence(objective, search: SearchSettings, decision: DecisionSettin
 def restart_searches(objective, search: SearchSettings, decision: DecisionSettings,
                      n_min: int, n_max: int) -> tuple[np.ndarray, list[int]]:
     """The independent restarts of :func:`restart_evidence`: the best solution (7,) of each,
-    stacked (restarts, 7), and the evaluations each spent."""
+    stacked (restarts, 7), and the evaluations each spent.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        The run's objective.
+    search : SearchSettings
+        The main search's settings.
+    decision : DecisionSettings
+        ``restarts`` and ``restart_share`` (the share of the main search's evaluations each).
+    n_min, n_max : int
+        The range of points per frame.
+
+    Returns
+    -------
+    best : ndarray, shape (restarts, 7)
+        Each restart's best solution ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points).
+    evaluations : list of int
+        The evaluations each spent.
+    """
     from .search import run_nsga2
 
     d, s = decision, search
@@ -812,7 +906,17 @@ def start_evidence(objective, x_opt: np.ndarray) -> StartComparison:
 
 def start_text(start: StartComparison) -> str:
     """How the initial extrinsic compares with a result that is not trusted, in words for the
-    verdict line (``start`` from :func:`start_evidence`)."""
+    verdict line.
+
+    Parameters
+    ----------
+    start : StartComparison
+        From :func:`start_evidence`.
+
+    Returns
+    -------
+    str
+    """
     k, n = start.frames_start_better, start.frames
     if start.result_clearly_better:
         return (f"the frames do prefer the result to the initial extrinsic ({n - k} of {n} "
@@ -829,7 +933,22 @@ def alignment_px(objective, x_opt: np.ndarray, frames=None) -> float:
     distance in pixels from the edge feature points (depth and intensity edges) in view to the
     nearest image edge, read from the distance transforms as the objective reads them
     (bilinear), over the points within the truncation (the others match no edge), of every
-    frame or of ``frames`` (indices). NaN when no edge point matches."""
+    frame or of ``frames`` (indices). NaN when no edge point matches.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective or FrameSubset
+        The objective whose frames and feature points count.
+    x_opt : ndarray, shape (7,)
+        The pose ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    frames : sequence of int, optional
+        The frames' indices; every frame when omitted.
+
+    Returns
+    -------
+    float
+        Pixels.
+    """
     sc = objective.scene
     T = objective.transforms(np.atleast_2d(x_opt))[0]
     found = []
@@ -859,7 +978,20 @@ def pose_per_px(objective, x_opt: np.ndarray) -> np.ndarray:
     axes free to compensate: ``sqrt(diag(M^-1))`` with ``M`` the mean over the points of
     ``J_p^T J_p`` (``J_p``: the 2 x 6 pixel Jacobian of point p, by finite differences). It
     exceeds the one-axis :func:`~paretocal.quality.axis_resolution` where axes trade against
-    each other (camera height against pitch); inf for an axis the points do not pin down."""
+    each other (camera height against pitch); inf for an axis the points do not pin down.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective or FrameSubset
+        The objective whose frames and feature points count.
+    x_opt : ndarray, shape (7,)
+        The pose ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+
+    Returns
+    -------
+    ndarray, shape (6,)
+        Metres and degrees per pixel.
+    """
     sc = objective.scene
     eps = np.r_[[1e-4] * 3, [1e-3] * 3]                        # m, deg: far below a pixel
     X = np.tile(np.asarray(x_opt, dtype=np.float64), (7, 1))
@@ -948,7 +1080,20 @@ def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
     than half its finest step. The finest, not each direction's own: edges of every
     orientation pin the pose together, and a sparse direction (16 beams, 1.7 deg between
     rings) is crossed by edges the dense one places (a floor per direction judged the KITTI
-    drive decimated to 16 beams unreliable although its runs ended 0.3-0.4 deg / 2-5 cm off)."""
+    drive decimated to 16 beams unreliable although its runs ended 0.3-0.4 deg / 2-5 cm off).
+
+    Parameters
+    ----------
+    align_px : float
+        The image alignment the result reached (px, :func:`alignment_px`).
+    sampling : ndarray, shape (2,), optional
+        The LiDAR's sampling step in the image along u and v (px); None: unknown (no floor).
+
+    Returns
+    -------
+    float
+        Pixels.
+    """
     if sampling is not None and np.all(np.isfinite(sampling)):
         return max(float(align_px), 0.5 * float(np.min(sampling)))
     return float(align_px)
@@ -1029,7 +1174,27 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     quality report at the result). ``sampling`` (2,): the LiDAR's sampling step
     in the image, px along u and v (:func:`~paretocal.features.prepare.sampling_px`, the
     median over the frames), which bounds how well any frame can place an edge. ``cameras``
-    (a joint calibration of several cameras): as for :func:`camera_evidence`."""
+    (a joint calibration of several cameras): as for :func:`camera_evidence`.
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        The run's objective.
+    settings : Settings
+        The run's settings (the search box, the stated initial error, the restarts).
+    n_min, n_max : int
+        The range of points per frame.
+    x : ndarray, shape (7,)
+        The result ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    sampling : ndarray, shape (2,), optional
+        The LiDAR's sampling step in the image along u and v (px).
+    cameras : dict, optional
+        By camera name, ``(frames, sampling)`` (:func:`camera_evidence`).
+
+    Returns
+    -------
+    Evidence
+    """
     restart = None
     if settings.decision.restarts > 0:
         restart = restart_evidence(objective, settings.search, settings.decision, n_min,
@@ -1063,6 +1228,15 @@ def reliability(result: "CalibrationResult") -> Reliability:
     disagree (jackknife standard errors, those of the intervals at the result's local optimum
     when the evidence has them), and the evidence's checks. Thresholds: the ``RELIABLE_*``
     constants.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The run, with its evidence (:func:`gather_evidence`) when gathered.
+
+    Returns
+    -------
+    Reliability
     """
     reasons = []
     n_frames = len(result.frames)
@@ -1284,7 +1458,17 @@ def _imprecise(iv: Intervals) -> str | None:
 
 def verdict_text(rel: Reliability) -> str:
     """The verdict of :func:`reliability` in one line for a person: ``"OK: ..."`` or
-    ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``."""
+    ``"UNRELIABLE: <main reason> (and N more reasons in result.json)"``.
+
+    Parameters
+    ----------
+    rel : Reliability
+        The verdict.
+
+    Returns
+    -------
+    str
+    """
     reasons = rel.reasons
     if rel.ok or not reasons:
         return (f"OK: nothing the run measured casts doubt on the result ({rel.frames} "
@@ -1298,7 +1482,17 @@ def verdict_text(rel: Reliability) -> str:
 def interval_text(rel: Reliability | None) -> str | None:
     """The per-axis 95 % intervals of :func:`reliability` in one line, or None without them
     (none, or a result judged unreliable):
-    ``"x +-1.2 cm, ..., roll +-0.3 deg; not determined by the data: z"``."""
+    ``"x +-1.2 cm, ..., roll +-0.3 deg; not determined by the data: z"``.
+
+    Parameters
+    ----------
+    rel : Reliability or None
+        The verdict.
+
+    Returns
+    -------
+    str or None
+    """
     iv = None if rel is None else rel.intervals
     if iv is None:
         return None

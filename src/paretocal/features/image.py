@@ -149,7 +149,19 @@ def edge_map(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: float = 
 
 
 def distance_transform(edges: np.ndarray, truncation_px: float) -> np.ndarray:
-    """Exact Euclidean distance (pixels) to the nearest edge pixel, truncated; float32 (H, W)."""
+    """Exact Euclidean distance (pixels) to the nearest edge pixel, truncated; float32 (H, W).
+
+    Parameters
+    ----------
+    edges : ndarray, shape (H, W)
+        Edge map, nonzero on edge pixels.
+    truncation_px : float
+        The largest distance kept (px).
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32
+    """
     # OpenCV measures the distance to the nearest zero pixel: make edges the zeros.
     dt = cv2.distanceTransform(np.where(edges > 0, 0, 255).astype(np.uint8), cv2.DIST_L2,
                                cv2.DIST_MASK_PRECISE)
@@ -176,11 +188,34 @@ def image_features(image_bgr: np.ndarray, blur_sigma: float = 1.0, canny_low: fl
                    noise_sigmas: float | None = None) -> ImageFeatures:
     """Edge map, truncated distance transform and edge pixel list of one image.
 
-    ``mask`` (H, W) bool, True on usable pixels: edges on or near masked pixels are dropped
-    before the distance transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over
-    the usable pixels. ``relative``: thresholds scaled to the image's exposure
-    (:func:`canny_thresholds`); ``equalize``: local contrast equalised first; ``noise_sigmas``:
-    thresholds from the image's gradient noise (:func:`edge_map`).
+    Parameters
+    ----------
+    image_bgr : ndarray, shape (H, W, 3) or (H, W), uint8
+        The image as taken.
+    blur_sigma : float
+        Gaussian sigma in pixels before Canny (0 disables the blur).
+    canny_low, canny_high : float
+        Canny's hysteresis thresholds on the L2 gradient magnitude.
+    truncation_px : float
+        The distance transform's truncation (px).
+    min_edge_px : int
+        Drop connected edge fragments of fewer pixels; 0 keeps all.
+    mask : ndarray, shape (H, W), bool, optional
+        True on usable pixels: edges on or near masked pixels are dropped before the distance
+        transform (:func:`drop_masked_edges`) and ``mean_dt`` is the mean over the usable
+        pixels.
+    relative : bool
+        Thresholds scaled to the image's exposure (:func:`canny_thresholds`).
+    equalize : bool
+        Local contrast equalised first (CLAHE).
+    noise_sigmas : float, optional
+        Thresholds from the image's gradient noise (:func:`edge_map`).
+
+    Returns
+    -------
+    ImageFeatures
+        The edge map, the distance transform (px), its mean, the edge pixels (E, 2) and the
+        mask.
     """
     edges = edge_map(image_bgr, blur_sigma, canny_low, canny_high, min_edge_px, relative, mask,
                      equalize, noise_sigmas)

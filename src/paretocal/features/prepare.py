@@ -65,6 +65,15 @@ class FrameFeatures:
 
         Because the order is stratified, the tail is a representative sample that the search
         never sees: it scores each solution's pose without the optimiser's selection bias.
+
+        Parameters
+        ----------
+        holdout : float
+            The share of the points held out, in [0, 1).
+
+        Returns
+        -------
+        head, tail : FrameFeatures
         """
         m = len(self.xyz)
         cut = m - int(round(holdout * m))
@@ -86,6 +95,20 @@ def stratified_order(group: np.ndarray, cell: np.ndarray, rng: np.random.Generat
 
     Each stratum's points get keys ``(rank + u) / size`` with a random rank order and
     ``u ~ U(0, 1)``; sorting all keys interleaves the strata evenly.
+
+    Parameters
+    ----------
+    group : ndarray of int, shape (M,)
+        Each point's feature group.
+    cell : ndarray of int, shape (M,)
+        Each point's image cell.
+    rng : numpy.random.Generator
+        The random generator (the order is seeded).
+
+    Returns
+    -------
+    ndarray of int64, shape (M,)
+        The permutation.
     """
     m = len(group)
     if m == 0:
@@ -159,11 +182,34 @@ def prepare_frame(frame: Frame, T_init: np.ndarray, features: FeatureSettings,
 
     Only feature points that project into the image grown by ``view_margin_px`` at ``T_init``
     are kept: the objective compares what both sensors see, and points far outside the view
-    would reward poses that pull unseen structure into the image. ``rings`` (from
-    :func:`frame_rings`) saves recovering them again, ``image`` (the frame's image features
-    with the same settings, from an earlier pass) computing those again: neither depends on
-    the pose. ``sampling``: measure the LiDAR's sampling step in the image (the verdict's;
-    a stage that only searches leaves it None).
+    would reward poses that pull unseen structure into the image.
+
+    Parameters
+    ----------
+    frame : Frame
+        The image, the cloud, the camera and their optional fields.
+    T_init : ndarray, shape (4, 4)
+        The extrinsic ``T_cam_lidar`` (m) whose view chooses the points.
+    features : FeatureSettings
+        The ``features`` section of the settings.
+    objective : ObjectiveSettings
+        The ``objective`` section (which feature groups are used, the Canny and DT settings).
+    rng : numpy.random.Generator
+        The seeded generator of the points' order.
+    rings : Rings, optional
+        The sweep's rings (:func:`frame_rings`): saves recovering them again.
+    image : ImageFeatures, optional
+        The frame's image features with the same settings, from an earlier pass: saves
+        computing them again (neither depends on the pose).
+    sampling : bool
+        Measure the LiDAR's sampling step in the image (the verdict's; a stage that only
+        searches leaves it None).
+
+    Returns
+    -------
+    FrameFeatures
+        The feature points (M, 3) in the LiDAR frame (m), in their search order, with their
+        groups and weights, and the image features.
     """
     img = image if image is not None else frame_image_features(frame, features, objective)
     # Rings come from the whole sweep; edges are then found only in the part of the sweep

@@ -38,6 +38,18 @@ def read_extrinsic(path: str | Path, kitti_rect: np.ndarray | None = None) -> np
 
     Raises :class:`InputError` naming the file and the keys it found when none of these is
     there, or the values are not a finite rigid transform.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (YAML, JSON or KITTI calibration text).
+    kitti_rect : ndarray, shape (4, 4), optional
+        ``[I | b] @ R_rect_00`` of the KITTI source, for a ``calib_velo_to_cam.txt``.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        ``T_cam_lidar`` (m).
     """
     path = Path(path)
     if _kitti_text(path) is not None:
@@ -85,6 +97,20 @@ def read_init(path: str | Path, source, camera: int | None = None) -> np.ndarray
 
     Raises :class:`InputError` naming the file when it cannot be read, or when it holds KITTI's
     ``Tr`` and ``source`` is not a KITTI source.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, in any form :func:`read_extrinsic` reads.
+    source : str or Path or Source or list of Frame
+        The dataset calibrated (for KITTI's rectification).
+    camera : int, optional
+        The KITTI camera index used to detect a folder (default 2).
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        ``T_cam_lidar`` (m).
     """
     from .exports import kitti_rect_of
     from .layouts import detect_source
@@ -216,5 +242,15 @@ def extrinsic_yaml(T: np.ndarray, comment: str = "") -> str:
 
 
 def write_extrinsic(path: str | Path, T: np.ndarray, comment: str = "") -> None:
-    """Write ``T_cam_lidar`` to a YAML file atomically."""
+    """Write ``T_cam_lidar`` to a YAML file atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (``extrinsic.yaml``); an ``--init`` file for a later run.
+    T : ndarray, shape (4, 4)
+        ``T_cam_lidar`` (LiDAR -> camera, m).
+    comment : str
+        Comment lines written above the matrix (``# ...``).
+    """
     atomic_write_text(Path(path), extrinsic_yaml(T, comment))

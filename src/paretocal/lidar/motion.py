@@ -112,6 +112,8 @@ class MotionEstimate:
         The voxel edge (m) of each cloud's finest subsample.
     per_frame : bool
         Whether each frame was de-skewed with its own twist during the iteration.
+    min_share : float
+        The least median share of the translation constraint that makes an axis observable.
     """
 
     ref_times: np.ndarray
@@ -150,6 +152,17 @@ class MotionEstimate:
         Raises ``ValueError`` when the motion is not observable (see :attr:`observable`),
         unless ``force``: de-skewing with a twist the data do not determine moves points by
         a wrong amount, which is worse than leaving the cloud skewed.
+
+        Parameters
+        ----------
+        k : int
+            The frame's index.
+        force : bool
+            Return the twist even when the motion is not observable.
+
+        Returns
+        -------
+        Twist
         """
         if not self.compensable and not force:
             axes = "".join(a for a, ok in zip("xyz", self.observable) if not ok)

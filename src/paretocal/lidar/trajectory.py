@@ -102,7 +102,22 @@ class Motion(Protocol):
     """Anything :func:`deskew` can use: maps ``F(t)`` coordinates into ``F(t_ref)``."""
 
     def relative(self, t: np.ndarray, t_ref: float) -> tuple[Rotation, np.ndarray]:
-        """Rotations (N) and translations (N, 3) of ``T(t_ref <- t)`` for times ``t`` (N,)."""
+        """Rotations (N) and translations (N, 3) of ``T(t_ref <- t)`` for times ``t`` (N,).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times (s), on the clock of the per-point times.
+        t_ref : float
+            The reference time (s).
+
+        Returns
+        -------
+        R : scipy.spatial.transform.Rotation
+            N rotations.
+        p : ndarray, shape (N, 3)
+            Translations (m).
+        """
         ...
 
 
@@ -132,12 +147,25 @@ class Twist:
 
     @classmethod
     def zero(cls) -> Twist:
+        """No motion."""
         return cls(np.zeros(3), np.zeros(3))
 
     @classmethod
     def from_pose(cls, T: np.ndarray, dt: float) -> Twist:
         """The constant twist that moves the frame by ``T`` (4x4, ``F(t0) <- F(t0 + dt)``) in
-        ``dt`` seconds."""
+        ``dt`` seconds.
+
+        Parameters
+        ----------
+        T : ndarray, shape (4, 4)
+            The motion over ``dt`` (m).
+        dt : float
+            Its duration (s), non-zero.
+
+        Returns
+        -------
+        Twist
+        """
         if not dt:
             raise ValueError("Twist.from_pose needs a non-zero time step")
         xi = se3_log(np.asarray(T, dtype=np.float64)) / dt
@@ -154,11 +182,37 @@ class Twist:
         return float(np.linalg.norm(self.v))
 
     def pose(self, dt: float) -> np.ndarray:
-        """``T(t <- t + dt)``, 4x4: the frame's pose ``dt`` seconds later in the earlier frame."""
+        """``T(t <- t + dt)``, 4x4: the frame's pose ``dt`` seconds later in the earlier frame.
+
+        Parameters
+        ----------
+        dt : float
+            Seconds.
+
+        Returns
+        -------
+        ndarray, shape (4, 4)
+        """
         R, t = se3_exp(dt * self.v[None], dt * self.w[None])
         return se3_matrix(R[0], t[0])
 
     def relative(self, t: np.ndarray, t_ref: float) -> tuple[Rotation, np.ndarray]:
+        """Rotations (N) and translations (N, 3) of ``T(t_ref <- t)`` for times ``t`` (N,).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times (s).
+        t_ref : float
+            The reference time (s).
+
+        Returns
+        -------
+        R : scipy.spatial.transform.Rotation
+            N rotations.
+        p : ndarray, shape (N, 3)
+            Translations (m).
+        """
         dt = np.asarray(t, dtype=np.float64).reshape(-1) - float(t_ref)
         return se3_exp(dt[:, None] * self.v, dt[:, None] * self.w)
 
@@ -166,15 +220,15 @@ class Twist:
 class PoseTrajectory:
     """User-supplied poses of the cloud frame, interpolated in time.
 
+    Rotation is interpolated by SLERP and translation linearly between the two enclosing
+    poses. Times outside ``[times[0], times[-1]]`` raise ``ValueError`` (no extrapolation).
+
     Parameters
     ----------
     times : array_like, shape (M,)
         Strictly increasing times in seconds, on the clock of the per-point times; M >= 2.
     poses : array_like, shape (M, 4, 4)
         ``T_world_cloud``: the cloud frame's pose in any fixed world frame at each time.
-
-    Rotation is interpolated by SLERP and translation linearly between the two enclosing
-    poses. Times outside ``[times[0], times[-1]]`` raise ``ValueError`` (no extrapolation).
     """
 
     def __init__(self, times, poses):
@@ -194,7 +248,20 @@ class PoseTrajectory:
         self._slerp = Slerp(times, Rotation.from_matrix(poses[:, :3, :3]))
 
     def pose_at(self, t) -> tuple[Rotation, np.ndarray]:
-        """``T_world_cloud`` at times ``t`` (N,): rotations (N) and translations (N, 3)."""
+        """``T_world_cloud`` at times ``t`` (N,): rotations (N) and translations (N, 3).
+
+        Parameters
+        ----------
+        t : array_like, shape (N,)
+            Times (s), within the trajectory's.
+
+        Returns
+        -------
+        R : scipy.spatial.transform.Rotation
+            N rotations.
+        p : ndarray, shape (N, 3)
+            Translations (m).
+        """
         t = np.asarray(t, dtype=np.float64).reshape(-1)
         lo, hi = self.times[0], self.times[-1]
         if len(t) and (t.min() < lo or t.max() > hi):
@@ -204,6 +271,22 @@ class PoseTrajectory:
         return self._slerp(t), trans
 
     def relative(self, t: np.ndarray, t_ref: float) -> tuple[Rotation, np.ndarray]:
+        """Rotations (N) and translations (N, 3) of ``T(t_ref <- t)`` for times ``t`` (N,).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+            Times (s), within the trajectory's.
+        t_ref : float
+            The reference time (s), within the trajectory's.
+
+        Returns
+        -------
+        R : scipy.spatial.transform.Rotation
+            N rotations.
+        p : ndarray, shape (N, 3)
+            Translations (m).
+        """
         R_t, p_t = self.pose_at(t)
         R_r, p_r = self.pose_at([t_ref])
         inv = R_r.inv()
@@ -227,7 +310,17 @@ def check_cloud(xyz, t) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sweep_centre(t: np.ndarray) -> float:
-    """Centre of a sweep's time window, ``(min(t) + max(t)) / 2``, in seconds."""
+    """Centre of a sweep's time window, ``(min(t) + max(t)) / 2``, in seconds.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        The sweep's per-point times (s).
+
+    Returns
+    -------
+    float
+    """
     t = np.asarray(t, dtype=np.float64)
     return 0.5 * (float(t.min()) + float(t.max()))
 

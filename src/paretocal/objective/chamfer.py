@@ -31,7 +31,22 @@ from .scene import N_GROUPS
 
 
 def group_weights(w_edge: float, contrast: float) -> np.ndarray:
-    """Signed weights per feature group, shape (G,)."""
+    """Signed weights per feature group, shape (G,).
+
+    Parameters
+    ----------
+    w_edge : float
+        ``w1``, the weight of the depth edges; the intensity edges get ``1 - w_edge``.
+    contrast : float
+        The weight of the smooth-surface points, subtracted (they should lie away from image
+        edges).
+
+    Returns
+    -------
+    ndarray, shape (G,)
+        Indexed by ``DEPTH_EDGE``, ``INTENSITY_EDGE`` and ``SMOOTH``
+        (:mod:`paretocal.features.lidar`).
+    """
     w = np.zeros(N_GROUPS)
     w[DEPTH_EDGE] = w_edge
     w[INTENSITY_EDGE] = 1.0 - w_edge

@@ -58,9 +58,31 @@ class CostModel:
     probe: dict
 
     def time_ms(self, points) -> np.ndarray:
+        """Modelled time of one evaluation (CPU ms on one core).
+
+        Parameters
+        ----------
+        points : array_like, shape (...)
+            ``P``, the points evaluated over all frames.
+
+        Returns
+        -------
+        ndarray, shape (...)
+        """
         return self.ms_fixed + self.ms_per_point * np.asarray(points, dtype=np.float64)
 
     def nbytes(self, points) -> np.ndarray:
+        """Modelled bytes read by one evaluation.
+
+        Parameters
+        ----------
+        points : array_like, shape (...)
+            ``P``, the points evaluated over all frames.
+
+        Returns
+        -------
+        ndarray, shape (...)
+        """
         return self.bytes_fixed + self.bytes_per_point * np.asarray(points, dtype=np.float64)
 
     def normalised(self, points) -> tuple[np.ndarray, np.ndarray]:
@@ -68,12 +90,22 @@ class CostModel:
 
         For affine models with positive slopes both equal ``(P - P_min) / (P_max - P_min)``
         exactly; computing them that way keeps them bitwise independent of the timing.
+
+        Parameters
+        ----------
+        points : array_like, shape (...)
+            ``P``, the points evaluated over all frames.
+
+        Returns
+        -------
+        t_norm, m_norm : ndarray, shape (...)
         """
         p = np.asarray(points, dtype=np.float64)
         u = (p - self.points_min) / max(self.points_max - self.points_min, 1)
         return u, u.copy()
 
     def to_dict(self) -> dict:
+        """The model's fields, as ``result.json``'s ``cost_model`` holds them."""
         return asdict(self)
 
     def for_scene(self, scene: Scene, n_min: int, n_max: int, source: str | None = None
@@ -81,7 +113,21 @@ class CostModel:
         """This model's time line applied to another scene of the same frames (the feature
         points chosen again at another pose): the time per point and per candidate belong to
         the machine and the evaluator, the bytes and the normalisation range to the scene.
-        ``source`` (where the line comes from) is recorded in ``probe["source"]``."""
+        ``source`` (where the line comes from) is recorded in ``probe["source"]``.
+
+        Parameters
+        ----------
+        scene : Scene
+            The other scene.
+        n_min, n_max : int
+            The search's range of points per frame in that scene.
+        source : str, optional
+            Where the time line comes from (``"cache FILE"``, ``"checkpoint FILE"``).
+
+        Returns
+        -------
+        CostModel
+        """
         probe = dict(self.probe, **({"source": source} if source else {}))
         return CostModel(ms_fixed=self.ms_fixed, ms_per_point=self.ms_per_point,
                          bytes_fixed=_bytes_fixed(scene), bytes_per_point=float(BYTES_PER_POINT),
@@ -102,12 +148,22 @@ def measure_cost_model(scene: Scene, evaluator, T_probe: np.ndarray, n_min: int,
     Parameters
     ----------
     scene : Scene
+        The frames' feature points and distance transforms.
     evaluator : callable
         ``evaluator(scene, T, n) -> (S1, S2, n_in)`` as in :mod:`paretocal.objective.kernel`.
     T_probe : ndarray, shape (4, 4)
         Extrinsic used for the probe population (the initial guess: realistic visibility).
     n_min, n_max : int
         The search's range of points per frame.
+    candidates : int
+        The probe population's size.
+    repeats : int
+        Batches timed at each ``n``; the fastest counts.
+
+    Returns
+    -------
+    CostModel
+        The line fitted to the times at five ``n`` (CPU ms of one evaluation on one core).
     """
     ns = np.unique(np.linspace(n_min, n_max, 5).round().astype(np.int64))
     time_per_candidate(scene, evaluator, T_probe, ns[-1], candidates, 1)  # warm-up (JIT)

@@ -312,6 +312,7 @@ def sums_numba(scene: Scene, T: np.ndarray, n: np.ndarray):
     Parameters
     ----------
     scene : Scene
+        The frames' feature points and distance transforms (:func:`build_scene`).
     T : ndarray, shape (C, 4, 4) or (C, 3, 4)
         Candidate extrinsics ``T_cam_lidar``.
     n : ndarray, shape (C,)
@@ -408,7 +409,26 @@ def bilinear_usable(usable: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def sums_numpy(scene: Scene, T: np.ndarray, n: np.ndarray, chunk_points: int = 4_000_000):
-    """The same sums as :func:`sums_numba`, batched with numpy over candidates."""
+    """The same sums as :func:`sums_numba`, batched with numpy over candidates.
+
+    Parameters
+    ----------
+    scene : Scene
+        The frames' feature points and distance transforms.
+    T : ndarray, shape (C, 4, 4) or (C, 3, 4)
+        Candidate extrinsics ``T_cam_lidar``.
+    n : ndarray, shape (C,)
+        Points per frame of each candidate.
+    chunk_points : int
+        Largest number of projected points held at once (memory bound).
+
+    Returns
+    -------
+    S1, S2 : ndarray, shape (C, F, G), float64
+        Sums of the per-point cost (px) and of its square, per feature group.
+    n_in : ndarray, shape (C, F), int64
+        Points that landed on usable pixels of the image.
+    """
     R = _rigid(T)
     n = np.asarray(n, dtype=np.int64)
     C, F = len(R), scene.n_frames
@@ -454,10 +474,26 @@ def sums_numpy(scene: Scene, T: np.ndarray, n: np.ndarray, chunk_points: int = 4
 def sums_kdtree(scene: Scene, edge_uv: list[np.ndarray], T: np.ndarray, n: np.ndarray):
     """Exact oracle: distances from a KD-tree over the edge pixels, candidate by candidate.
 
-    ``edge_uv[f]`` is frame f's (E, 2) edge pixel list and ``T`` (C, 4, 4) the candidate
-    extrinsics. The cost per point is ``min(distance, truncation)`` where the DT-based
-    evaluators interpolate the same function; the projection and the masked-pixel rule are
-    theirs.
+    The cost per point is ``min(distance, truncation)`` where the DT-based evaluators
+    interpolate the same function; the projection and the masked-pixel rule are theirs.
+
+    Parameters
+    ----------
+    scene : Scene
+        The frames' feature points and distance transforms.
+    edge_uv : list of ndarray, shape (E, 2)
+        Per frame, the pixel coordinates of its image edges.
+    T : ndarray, shape (C, 4, 4)
+        Candidate extrinsics ``T_cam_lidar``.
+    n : ndarray, shape (C,)
+        Points per frame of each candidate.
+
+    Returns
+    -------
+    S1, S2 : ndarray, shape (C, F, G), float64
+        Sums of the per-point cost (px) and of its square, per feature group.
+    n_in : ndarray, shape (C, F), int64
+        Points that landed on usable pixels of the image.
     """
     from scipy.spatial import cKDTree
 
@@ -492,7 +528,18 @@ def sums_kdtree(scene: Scene, edge_uv: list[np.ndarray], T: np.ndarray, n: np.nd
 
 
 def get_evaluator(name: str = "auto"):
-    """The sums function for ``"numba"``, ``"numpy"`` or ``"auto"`` (numba when available)."""
+    """The sums function for ``"numba"``, ``"numpy"`` or ``"auto"`` (numba when available).
+
+    Parameters
+    ----------
+    name : {"auto", "numba", "numpy"}
+        The evaluator (``--evaluator``).
+
+    Returns
+    -------
+    callable
+        :func:`sums_numba` or :func:`sums_numpy`.
+    """
     if name == "numpy" or (name == "auto" and not HAVE_NUMBA):
         return sums_numpy
     if name in ("numba", "auto"):

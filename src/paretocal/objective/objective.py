@@ -24,11 +24,25 @@ class AlignmentObjective(Protocol):
     scene: Scene
 
     def transforms(self, X: np.ndarray) -> np.ndarray:
-        """Candidate extrinsics ``T_cam_lidar``, shape (C, 4, 4)."""
+        """Candidate extrinsics ``T_cam_lidar``, shape (C, 4, 4).
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         ...
 
     def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
-        """At least ``f1`` (C,) (px) and ``per_frame`` (C, F), the per-frame terms."""
+        """At least ``f1`` (C,) (px) and ``per_frame`` (C, F), the per-frame terms.
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        ucb_k : float, optional
+            The sampling-error multiplier for this call (0: the plain mean over the points).
+        """
         ...
 
 
@@ -37,11 +51,23 @@ class PopulationObjective(AlignmentObjective, Protocol):
     cost alone."""
 
     def evaluate(self, X: np.ndarray) -> np.ndarray:
-        """``F`` of shape (C, 2) for candidates ``X`` (C, 7)."""
+        """``F`` of shape (C, 2) for candidates ``X`` (C, 7).
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         ...
 
     def cost(self, X: np.ndarray) -> dict[str, np.ndarray]:
-        """At least ``f2`` (C,), the modelled cost of evaluating each candidate."""
+        """At least ``f2`` (C,), the modelled cost of evaluating each candidate.
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         ...
 
 
@@ -51,10 +77,13 @@ class CalibrationObjective:
     Parameters
     ----------
     scene : Scene
+        The frames' feature points and distance transforms.
     T_init : ndarray, shape (4, 4)
         Initial extrinsic; candidates are corrections ``T_init @ D(x..roll)``.
     settings : ObjectiveSettings
+        The ``objective`` section of the settings.
     cost_model : CostModel
+        The affine cost model of this machine (the second objective).
     edge_uv : list of ndarray, optional
         Edge pixels per frame, needed only by the paper's Chamfer.
     ucb_k : float, optional
@@ -75,17 +104,31 @@ class CalibrationObjective:
         self.ucb_k = float(ucb_k if ucb_k is not None else (settings.ucb_k or 0.0))
 
     def transforms(self, X: np.ndarray) -> np.ndarray:
-        """Candidate extrinsics ``T_init @ D``, shape (C, 4, 4)."""
+        """Candidate extrinsics ``T_init @ D``, shape (C, 4, 4).
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7) or (C, 6)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         return apply_correction(self.T_init, np.asarray(X, dtype=np.float64)[:, :6])
 
     def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
         """First objective and its parts for candidates X, shape (C, 7).
 
-        ``ucb_k`` overrides the sampling-error multiplier for this call (0: the plain mean over
-        the points, as the quality report, the verdict and the basin test read it).
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        ucb_k : float, optional
+            Overrides the sampling-error multiplier for this call (0: the plain mean over the
+            points, as the quality report, the verdict and the basin test read it).
 
-        Returns ``f1`` (C,), ``mean`` (C, G) per-group mean cost (px), ``se`` (C,) sampling
-        error and ``in_view`` (C,) fraction of the evaluated points that landed in the image.
+        Returns
+        -------
+        dict
+            ``f1`` (C,), ``mean`` (C, G) per-group mean cost (px), ``se`` (C,) sampling error
+            and ``in_view`` (C,) fraction of the evaluated points that landed in the image.
         """
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         n = np.rint(X[:, 6]).astype(np.int64)
@@ -103,7 +146,20 @@ class CalibrationObjective:
         return out
 
     def cost(self, X: np.ndarray) -> dict[str, np.ndarray]:
-        """Second objective: ``f2`` (C,), with ``ms`` and ``bytes`` per evaluation."""
+        """Second objective: ``f2`` (C,), with ``ms`` and ``bytes`` per evaluation.
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+
+        Returns
+        -------
+        dict
+            ``f2`` (C,) = ``t_norm + m_norm``; ``ms`` (C,), the CPU ms of one evaluation
+            (modelled, or measured with ``cost: psutil``), ``bytes`` (C,) and ``points`` (C,),
+            the points evaluated over all frames.
+        """
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         n = np.rint(X[:, 6]).astype(np.int64)
         pts = self.scene.points_used(n)
@@ -133,7 +189,13 @@ class CalibrationObjective:
         return self._ref_ms
 
     def evaluate(self, X: np.ndarray) -> np.ndarray:
-        """``F`` of shape (C, 2): ``[f1, f2]`` for each candidate."""
+        """``F`` of shape (C, 2): ``[f1, f2]`` for each candidate.
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         return np.column_stack([self.chamfer(X)["f1"], self.cost(X)["f2"]])
 
 
@@ -145,6 +207,7 @@ class FrameSubset:
     Parameters
     ----------
     objective : CalibrationObjective
+        The objective over every frame.
     frames : array_like of int
         Indices of the frames in ``objective.scene``.
     """
@@ -155,11 +218,24 @@ class FrameSubset:
         self.scene = objective.scene
 
     def transforms(self, X: np.ndarray) -> np.ndarray:
-        """As :meth:`CalibrationObjective.transforms`."""
+        """As :meth:`CalibrationObjective.transforms`.
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        """
         return self.objective.transforms(X)
 
     def chamfer(self, X: np.ndarray, ucb_k: float | None = None) -> dict[str, np.ndarray]:
-        """``f1`` (C,) and ``per_frame`` (C, len(frames)) for candidates X (C, 7); ``ucb_k``
-        is ignored (always 0)."""
+        """``f1`` (C,) and ``per_frame`` (C, len(frames)) for candidates X (C, 7).
+
+        Parameters
+        ----------
+        X : ndarray, shape (C, 7)
+            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+        ucb_k : float, optional
+            Ignored (always 0).
+        """
         term = self.objective.chamfer(X, ucb_k=0.0)["per_frame"][:, self.frames]
         return {"f1": term.mean(axis=1), "per_frame": term}

@@ -114,13 +114,33 @@ class Scene:
         return np.diff(self.point_start)
 
     def points_used(self, n) -> np.ndarray:
-        """Points evaluated over all frames for ``n`` points per frame (shape of ``n``)."""
+        """Points evaluated over all frames for ``n`` points per frame (shape of ``n``).
+
+        Parameters
+        ----------
+        n : array_like of int, shape (...)
+            Points per frame (each frame contributes at most the points it has).
+
+        Returns
+        -------
+        ndarray of int64, shape (...)
+        """
         n = np.asarray(n, dtype=np.int64)
         return np.minimum(n[..., None], self.points_per_frame).sum(axis=-1)
 
     def group_weights(self, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sums of weights and of squared weights of each group among the first ``n`` points
-        of each frame, each of shape (C, F, G)."""
+        of each frame, each of shape (C, F, G).
+
+        Parameters
+        ----------
+        n : ndarray of int, shape (C,)
+            Points per frame of each candidate.
+
+        Returns
+        -------
+        W1, W2 : ndarray, shape (C, F, G)
+        """
         n = np.asarray(n, dtype=np.int64)
         m = np.minimum(n[:, None], self.points_per_frame[None, :])
         pref = self.group_prefix[np.arange(self.n_frames)[None, :], m]
@@ -132,16 +152,34 @@ class Scene:
 
     def frame_dt(self, f: int) -> np.ndarray:
         """The distance transform of frame f as the evaluators see it, float64 (H, W) in px;
-        NaN on masked pixels."""
+        NaN on masked pixels.
+
+        Parameters
+        ----------
+        f : int
+            The frame's index.
+        """
         q = self._frame_q(f)
         return np.where(q == DT_MASKED, np.nan, q * self.dt_scale)
 
     def frame_usable(self, f: int) -> np.ndarray:
-        """Frame f's usable (unmasked) pixels, bool (H, W)."""
+        """Frame f's usable (unmasked) pixels, bool (H, W).
+
+        Parameters
+        ----------
+        f : int
+            The frame's index.
+        """
         return self._frame_q(f) != DT_MASKED
 
     def frame_xyz(self, f: int) -> np.ndarray:
-        """Frame f's points, shape (M_f, 3) float32."""
+        """Frame f's points, shape (M_f, 3) float32, in the LiDAR frame (m).
+
+        Parameters
+        ----------
+        f : int
+            The frame's index.
+        """
         a, b = self.point_start[f], self.point_start[f + 1]
         return np.column_stack([self.x[a:b], self.y[a:b], self.z[a:b]])
 
@@ -154,10 +192,22 @@ class Scene:
 def build_scene(frames: list[FrameFeatures], z_min: float = 0.1, outside: str = "mean") -> Scene:
     """Lay out prepared frames for evaluation.
 
-    ``outside`` chooses the charge for a point out of view: ``"mean"`` charges the frame's mean
-    truncated DT (a point out of view costs what a point dropped at random costs, so neither
-    pushing points out nor pulling unseen points in pays on average); ``"truncation"`` charges
-    the full truncation distance.
+    Parameters
+    ----------
+    frames : list of FrameFeatures
+        The frames' features (:func:`paretocal.features.prepare_frame`), points in their
+        search order.
+    z_min : float
+        The smallest depth (pinhole) or range (fisheye, Mei) of a valid point (m).
+    outside : {"mean", "truncation"}
+        The charge for a point out of view: ``"mean"`` charges the frame's mean truncated DT (a
+        point out of view costs what a point dropped at random costs, so neither pushing points
+        out nor pulling unseen points in pays on average); ``"truncation"`` charges the full
+        truncation distance.
+
+    Returns
+    -------
+    Scene
     """
     counts = np.array([len(f.xyz) for f in frames], dtype=np.int64)
     point_start = np.concatenate([[0], np.cumsum(counts)])

@@ -92,7 +92,26 @@ def dumps(doc, indent: int = 2) -> str:
 
 def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
               figures: bool = True, overlay_frame: int = 0) -> list[Path]:
-    """Write the run directory; returns the paths written."""
+    """Write the run directory; returns the paths written.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (:func:`paretocal.calibrate`).
+    out_dir : str or Path
+        The run folder (made when missing).
+    frames : list of Frame, optional
+        The frames calibrated: needed for the overlays and ``interactive.html``.
+    figures : bool
+        Write ``pareto.png``, the overlays and ``interactive.html``.
+    overlay_frame : int
+        The index of the frame the overlays show.
+
+    Returns
+    -------
+    list of Path
+        The files written (docs/conventions.md section 3).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []

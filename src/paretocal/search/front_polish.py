@@ -23,10 +23,6 @@ def polish_front(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
     The grid fills parts of the n range the search's front did not reach, so the final front
     shows the whole trade-off; a grid solution enters the front only if it is non-dominated.
 
-    ``objective`` has ``chamfer(X)["f1"]`` and ``cost(X)["f2"]`` for X of shape (C, 7); the
-    box is the search's (``search``, ``n_min``, ``n_max``); ``iters`` Newton iterations per
-    polish (``decision.polish_iters``). Returns the new front ``(X, F)`` and the number of evaluations spent.
-
     Then the weakly determined directions of the best pose are explored: edge alignment
     constrains some combinations poorly (a small pitch against a few centimetres of height
     aligns everything near one depth), and a neighbouring minimum along such a valley can be
@@ -34,9 +30,37 @@ def polish_front(objective: PopulationObjective, X: np.ndarray, F: np.ndarray,
     largest n are polished, and the best pose at the largest n then seeds every n of the
     front again; each n keeps whichever basin scores lower.
 
-    ``explore=False`` polishes the solutions of ``X`` and nothing else (no n grid, valley
-    starts or cross-seeding): for a front whose every solution already starts from one
-    well-polished pose.
+    Parameters
+    ----------
+    objective : PopulationObjective
+        Has ``chamfer(X)["f1"]`` and ``cost(X)["f2"]`` for X of shape (C, 7).
+    X : ndarray, shape (k, 7)
+        The front's solutions ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    F : ndarray, shape (k, 2)
+        Their objectives ``[f1, f2]``.
+    search : SearchSettings
+        The search's settings; with ``n_min`` and ``n_max`` they give the box.
+    n_min, n_max : int
+        The range of points per frame.
+    iters : int
+        Newton iterations per polish (``decision.polish_iters``).
+    grid : int
+        Values of ``n`` (geometric) at which the best pose is polished.
+    max_front : int
+        Most front solutions polished, spread along the front by cost.
+    explore : bool
+        False: polish the solutions of ``X`` and nothing else (no n grid, valley starts or
+        cross-seeding), for a front whose every solution already starts from one well-polished
+        pose.
+
+    Returns
+    -------
+    X : ndarray, shape (m, 7)
+        The new front.
+    F : ndarray, shape (m, 2)
+        Its objectives.
+    evaluations : int
+        The evaluations spent.
     """
     xl, xu = bounds(search, n_min, n_max)
     fun = lambda Z: objective.chamfer(Z)["f1"]  # noqa: E731

@@ -74,12 +74,34 @@ class TimedObjective:
 
 
 def front_indices(F: np.ndarray) -> np.ndarray:
-    """Indices of the non-dominated rows of F (k, 2), both objectives minimised."""
+    """Indices of the non-dominated rows of F (k, 2), both objectives minimised.
+
+    Parameters
+    ----------
+    F : ndarray, shape (k, 2)
+        Objectives ``[f1, f2]``.
+
+    Returns
+    -------
+    ndarray of int64, shape (m,)
+    """
     return np.asarray(NonDominatedSorting().do(F, only_non_dominated_front=True), dtype=np.int64)
 
 
 def front_of(X: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Non-dominated, de-duplicated rows of (X, F), sorted by cost then f1."""
+    """Non-dominated, de-duplicated rows of (X, F), sorted by cost then f1.
+
+    Parameters
+    ----------
+    X : ndarray, shape (k, 7)
+        Solutions ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    F : ndarray, shape (k, 2)
+        Their objectives ``[f1, f2]``.
+
+    Returns
+    -------
+    X, F : ndarray, shapes (m, 7) and (m, 2)
+    """
     nd = front_indices(F)
     Xf, Ff = X[nd], F[nd]
     _, uniq = np.unique(np.round(Ff, 12), axis=0, return_index=True)
@@ -161,7 +183,21 @@ def run_nsga2(objective: PopulationObjective, settings: SearchSettings, n_min: i
 def initial_population(settings: SearchSettings, xl: np.ndarray, xu: np.ndarray,
                        seeds: np.ndarray | None = None) -> np.ndarray:
     """The first generation (pop, 7): uniform in the box from ``settings.seed`` (the paper's
-    sampling), plus the zero correction and ``seeds`` (k, 6) when ``settings.include_init``."""
+    sampling), plus the zero correction and ``seeds`` (k, 6) when ``settings.include_init``.
+
+    Parameters
+    ----------
+    settings : SearchSettings
+        ``pop``, ``seed`` and ``include_init``.
+    xl, xu : ndarray, shape (7,)
+        The box's lower and upper bounds (m, deg, points per frame; :func:`bounds`).
+    seeds : ndarray, shape (k, 6), optional
+        Corrections (m, deg) placed in the population.
+
+    Returns
+    -------
+    ndarray, shape (pop, 7)
+    """
     rng = np.random.default_rng(settings.seed)
     X0 = rng.uniform(xl, xu, (settings.pop, len(xl)))
     if settings.include_init:

@@ -15,7 +15,20 @@ UNITS = ("m", "m", "m", "deg", "deg", "deg", "points")
 
 
 def bounds(settings: SearchSettings, n_min: int, n_max: int) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of the seven variables, shape (7,) each."""
+    """Lower and upper bounds of the seven variables, shape (7,) each.
+
+    Parameters
+    ----------
+    settings : SearchSettings
+        ``bound_t`` (m) and ``bound_r`` (deg), the box in effect.
+    n_min, n_max : int
+        The range of points per frame.
+
+    Returns
+    -------
+    xl, xu : ndarray, shape (7,)
+        ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    """
     t, r = settings.bound_t, settings.bound_r
     xl = np.array([-t, -t, -t, -r, -r, -r, n_min], dtype=np.float64)
     xu = np.array([t, t, t, r, r, r, n_max], dtype=np.float64)

@@ -108,7 +108,31 @@ def coarse_seeds(feats, T_init: np.ndarray, search: SearchSettings, objective: O
                  z_min: float, cost_model, n_max: int) -> np.ndarray:
     """Seed poses for the search, shape (k, 6): the prepared frames ``feats`` are scored with
     their distance transforms truncated at ``search.seed_truncation_px`` on a rotation grid
-    (:func:`grid_seeds`) with the objective's settings; ``z_min`` (m) as the features'."""
+    (:func:`grid_seeds`) with the objective's settings.
+
+    Parameters
+    ----------
+    feats : list of FrameFeatures
+        The prepared frames.
+    T_init : ndarray, shape (4, 4)
+        The initial extrinsic ``T_cam_lidar`` (m); the seeds are corrections of it.
+    search : SearchSettings
+        The grid (``seed_grid_deg``, ``seed_grid_t_m``), its truncation, points and count, and
+        the box.
+    objective : ObjectiveSettings
+        The objective's settings.
+    z_min : float
+        The smallest depth or range of a valid point (m), as the features'.
+    cost_model : CostModel
+        The cost model (the coarse objective needs one; its cost is not used).
+    n_max : int
+        The most points per frame.
+
+    Returns
+    -------
+    ndarray, shape (k, 6)
+        Corrections ``(x, y, z, yaw, pitch, roll)`` (m, deg); empty without a grid.
+    """
     import dataclasses
 
     from ..features.image import distance_transform

@@ -58,6 +58,25 @@ class StudyPlan:
     study fits in 15 minutes on two cores (with every other frame the robustness sweep alone
     took 14 minutes); each is still seeded with the same rotation-grid poses and polished like
     the front.
+
+    Attributes
+    ----------
+    pop, gens : int
+        The main NSGA-II run's and the single-objective DE's population and generations.
+    frame_stride : int
+        Use every k-th selected frame.
+    eps_count : int
+        Cost limits of the epsilon-constraint study, geometric in f2 between the front's ends.
+    eps_pop, eps_gens : int
+        Population and generations of each epsilon-constraint GA run.
+    weights : tuple of float
+        The ``w1`` values of the robustness study (``w2 = 1 - w1``).
+    robust_seeds : tuple of int
+        The seeds of each weight's robustness runs.
+    robust_pop, robust_gens : int
+        Population and generations of each robustness run.
+    robust_frame_stride : int
+        The robustness runs use every k-th frame of the study.
     """
 
     pop: int = 1000
