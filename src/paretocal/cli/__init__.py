@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Optional, cast
 import click
 import typer
 
-from .errors import MESSAGE_CHARS, STOP, InputError, ParetocalError, SettingsError, excerpt
+from ..errors import MESSAGE_CHARS, STOP, InputError, ParetocalError, SettingsError, excerpt
 
 # Options shared by several commands, declared once.
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
@@ -46,7 +46,7 @@ log = logging.getLogger("paretocal")
 
 def _version(value: bool) -> None:
     if value:
-        from . import __version__
+        from .. import __version__
 
         typer.echo(f"paretocal {__version__}")
         raise typer.Exit(0)
@@ -62,7 +62,7 @@ def _main(version: Annotated[bool, typer.Option(
 
 def _choices(section: str, name: str, cls: str) -> type[Enum]:
     """The command line's choices of a setting, from the one list in the configuration."""
-    from .config import CHOICES
+    from ..config import CHOICES
 
     # Enum's functional API makes a class; mypy reads a call with a computed name as a member.
     return cast(type[Enum],
@@ -70,7 +70,7 @@ def _choices(section: str, name: str, cls: str) -> type[Enum]:
 
 
 if TYPE_CHECKING:
-    from .verdict import Reliability
+    from ..verdict import Reliability
 
     # Classes made at run time from the configuration's lists, which the type checker cannot
     # read: to it they are enums of strings like any other.
@@ -161,7 +161,7 @@ class _Progress:
 
 def _phases() -> dict:
     """The pipeline's phases and what the run does in each (``paretocal.pipeline.PHASES``)."""
-    from .pipeline import PHASES
+    from ..pipeline import PHASES
 
     return PHASES
 
@@ -239,8 +239,8 @@ def calibrate(
     quiet: Quiet = False,
 ) -> None:
     """Calibrate SOURCE and write result.json, pareto.csv, extrinsic.yaml and figures to --out."""
-    from .config import load_settings
-    from .io import load_frames
+    from ..config import load_settings
+    from ..io import load_frames
 
     _setup_logging(verbose, quiet)
     if resume is not None:
@@ -266,7 +266,7 @@ def calibrate(
     settings = load_settings(config)
     if budget_ms is not None and rule is None:
         rule = Rule("budget")
-    from .config import parse_init_error
+    from ..config import parse_init_error
     err_deg, err_m = parse_init_error(init_error, "--init-error")
     settings = settings.replace(
         search={"pop": pop, "gens": gens, "seed": seed, "n_min": n_min, "n_max": n_max,
@@ -279,8 +279,8 @@ def calibrate(
                   "polish": polish, "max_deviation_px": max_deviation})
     import dataclasses
 
-    from .config import states_init_error
-    from .io import detect_source, is_rig
+    from ..config import states_init_error
+    from ..io import detect_source, is_rig
 
     # The dataset's own init_error (calib.yaml) applies unless the user set it: the library
     # decides (config.dataset_settings) with the rest of the settings.
@@ -299,7 +299,7 @@ def calibrate(
     # Detected once: its warnings are said once.
     detected = detect_source(Path(source), settings.camera)
     _check_run_out(out, force)
-    from .io import read_init
+    from ..io import read_init
     T_init = read_init(init, detected, settings.camera) if init is not None else None
     loaded = load_frames(detected, settings.frames, settings.camera)
     _run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
@@ -310,8 +310,8 @@ def _check_run_out(out: Path, force: bool, option: str = "--out") -> None:
     """Fail before any work when ``out`` cannot take a calibration run: not a writable
     folder, a non-empty folder that is no run folder (unless ``force``), or a run folder
     holding what a run must not follow (:func:`paretocal.rundir.check_run_folder`)."""
-    from .io.atomic import check_output_dir, check_own_folder
-    from .rundir import MARKS, check_run_folder
+    from ..io.atomic import check_output_dir, check_own_folder
+    from ..rundir import MARKS, check_run_folder
 
     check_output_dir(out, option)
     if not force:
@@ -336,10 +336,10 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
     (:mod:`paretocal.apps.rig`)."""
     import dataclasses
 
-    from .errors import Interrupted
-    from .io import rig_cameras
-    from .io.atomic import check_output_dir, check_own_folder
-    from .apps.rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
+    from ..errors import Interrupted
+    from ..io import rig_cameras
+    from ..io.atomic import check_output_dir, check_own_folder
+    from ..apps.rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
 
     cams = rig_cameras(source)
     names = [n for n, _ in cams]
@@ -363,7 +363,7 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         _check_run_out(out / name, force)
     # --init names one camera: --camera NAME, or with --joint the first (refused above else).
     first = names[0] if joint or camera is None else camera
-    from .io import read_init
+    from ..io import read_init
     T_inits = {first: read_init(init, source, None)} if init is not None else None
     unreliable = []
 
@@ -401,8 +401,8 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                      dataset_options: bool = True) -> None:
     """Calibrate into the run folder ``out`` (:mod:`paretocal.rundir`); on an interrupt say
     where the partial front and the checkpoint are, and exit 130."""
-    from .errors import Interrupted
-    from .rundir import calibrate_run, resume_run, run_arguments
+    from ..errors import Interrupted
+    from ..rundir import calibrate_run, resume_run, run_arguments
 
     try:
         with _Progress(quiet) as progress:
@@ -410,7 +410,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                 recorded = run_arguments(out)
                 result = resume_run(out, checkpoint_every, progress=progress)
                 if recorded["joint"]:
-                    from .apps.rig import write_joint_summary
+                    from ..apps.rig import write_joint_summary
 
                     write_joint_summary(result, out, recorded["joint"], recorded["source"])
             else:
@@ -428,7 +428,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"({result.decision.measured_ms:.4g} measured now); "
                f"error vs reference: {_fmt_err(ref)}; "
                f"wrote {out}")
-    from .verdict import interval_text
+    from ..verdict import interval_text
 
     if ref is not None:
         typer.echo(f"paretocal: error vs reference per axis (LiDAR frame): {_fmt_axes(ref)}")
@@ -446,7 +446,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
 def interrupted_line(exc, out: Path) -> str:
     """The one line an interrupted calibration prints: where it stopped, what it wrote and how
     to continue (``exc`` is a :class:`~paretocal.errors.Interrupted`)."""
-    from .rundir import PARTIAL_FRONT
+    from ..rundir import PARTIAL_FRONT
 
     where = exc.phase + (f" (after generation {exc.generation})"
                          if exc.generation is not None else "")
@@ -467,7 +467,7 @@ STRICT_EXIT = 3
 
 def verdict_line(reliability: Reliability) -> str:
     """The CLI's last line: the verdict and its main reason, for a person."""
-    from .verdict import verdict_text
+    from ..verdict import verdict_text
 
     return f"paretocal: verdict {verdict_text(reliability)}"
 
@@ -475,8 +475,8 @@ def verdict_line(reliability: Reliability) -> str:
 def _resume(run_dir: Path, verbose: bool, quiet: bool, checkpoint_every: int,
             strict: bool = False) -> None:
     """Rebuild an interrupted run from ``run_dir/run_args.json`` and continue it."""
-    from .io.atomic import check_output_dir
-    from .rundir import check_run_folder, run_arguments
+    from ..io.atomic import check_output_dir
+    from ..rundir import check_run_folder, run_arguments
 
     args = run_arguments(run_dir)              # a one-line error before anything is loaded
     check_output_dir(run_dir, "--resume")
@@ -500,9 +500,9 @@ def perturb(
     extrinsic that this correction brings back to the dataset's (T_init = T_ref @ D^-1), so the
     correction to find lies in the box.
     """
-    from .geometry import decalibrate, pose_error
-    from .io import detect_source, write_extrinsic
-    from .io.atomic import check_output_file
+    from ..geometry import decalibrate, pose_error
+    from ..io import detect_source, write_extrinsic
+    from ..io.atomic import check_output_file
 
     _check_perturbation(rot, trans)
     check_output_file(out)
@@ -557,10 +557,10 @@ def check(
     without ground truth."""
     import json
 
-    from .check import check_extrinsic
-    from .config import load_settings
-    from .io import load_frames
-    from .io.atomic import atomic_write_text, check_output_file
+    from ..check import check_extrinsic
+    from ..config import load_settings
+    from ..io import load_frames
+    from ..io.atomic import atomic_write_text, check_output_file
 
     _setup_logging(verbose, quiet)
     if rot_tol <= 0 or trans_tol <= 0:
@@ -568,7 +568,7 @@ def check(
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
-    from .io import read_init
+    from ..io import read_init
     T = read_init(extrinsic, source, camera) if extrinsic is not None else None
     loaded = load_frames(source, frames, camera)
     if T is None:
@@ -610,11 +610,11 @@ def compare(
     distance, and with SOURCE which one the frames prefer (the verdict's paired test)."""
     import json
 
-    from .check import compare_extrinsics
-    from .config import load_settings
-    from .io import load_frames, read_init
-    from .io.atomic import atomic_write_text, check_output_file
-    from .io.extrinsic import needs_kitti_rect
+    from ..check import compare_extrinsics
+    from ..config import load_settings
+    from ..io import load_frames, read_init
+    from ..io.atomic import atomic_write_text, check_output_file
+    from ..io.extrinsic import needs_kitti_rect
 
     _setup_logging(verbose, quiet)
     if out is not None:
@@ -686,11 +686,11 @@ def study(
     checks, decision, innovization, weight robustness) and write report.html to --out."""
     import dataclasses
 
-    from .config import load_settings
-    from .io import load_frames
-    from .apps.study import STUDY_MARKS, StudyPlan, run_study
+    from ..config import load_settings
+    from ..io import load_frames
+    from ..apps.study import STUDY_MARKS, StudyPlan, run_study
 
-    from .io.atomic import check_output_dir, check_own_folder
+    from ..io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     check_output_dir(out)
@@ -704,7 +704,7 @@ def study(
     settings = load_settings(config).replace(search={"seed": seed})
     settings = dataclasses.replace(settings, camera=camera if camera is not None
                                    else settings.camera)
-    from .io import read_init
+    from ..io import read_init
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
     with _Progress(quiet) as progress:
@@ -731,17 +731,17 @@ def depth(
 ) -> None:
     """Write per frame the sparse depth map: <stem>.png (KITTI depth benchmark: uint16, metres x
     256, 0 = no return), <stem>.npy (float32 metres) and <stem>_overlay.png."""
-    from .depth import write_depth
-    from .io import load_frames
+    from ..depth import write_depth
+    from ..io import load_frames
 
-    from .io.atomic import check_output_dir
+    from ..io.atomic import check_output_dir
 
     _setup_logging(False, quiet)
     if max_depth <= 0:
         raise SettingsError("--max-depth must be positive")
     check_output_dir(out)
     loaded = load_frames(source, frames, camera)
-    from .io import read_init
+    from ..io import read_init
     T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
@@ -784,8 +784,8 @@ def extract(
 
     Without --image-topic or --cloud-topic, the bag's only image topic and only PointCloud2
     topic are used; when there are several, the topics are listed and the command exits 2."""
-    from .extract import REPORT, choose_topics, extract_bag
-    from .io import read_extrinsic
+    from ..extract import REPORT, choose_topics, extract_bag
+    from ..io import read_extrinsic
 
     _setup_logging(verbose, quiet)
     if image_topic is None or cloud_topic is None:
@@ -822,7 +822,7 @@ def extract(
 
 def _calib_entries(path: Path) -> dict:
     """The camera (and T_cam_lidar) of a --calib file, its mask made absolute."""
-    from .io.text import read_mapping
+    from ..io.text import read_mapping
 
     data = read_mapping(path)
     cam = data.get("camera")
@@ -833,7 +833,7 @@ def _calib_entries(path: Path) -> dict:
         cam["mask"] = str((path.parent / cam["mask"]).resolve())
     entries: dict[str, Any] = {"camera": cam}
     if data.get("T_cam_lidar") is not None:
-        from .geometry import check_rigid
+        from ..geometry import check_rigid
 
         entries["T_cam_lidar"] = check_rigid(data["T_cam_lidar"], str(path))
     return entries
@@ -867,10 +867,10 @@ def batch(
     when interrupted (Ctrl-C or SIGTERM), after writing the summary of what is done: rerun the
     same command to continue.
     """
-    from .apps.batch import BATCH_MARKS, BatchInterrupted, run_batch
-    from .config import load_settings, states_init_error
+    from ..apps.batch import BATCH_MARKS, BatchInterrupted, run_batch
+    from ..config import load_settings, states_init_error
 
-    from .io.atomic import check_output_dir, check_own_folder
+    from ..io.atomic import check_output_dir, check_own_folder
 
     _setup_logging(verbose, quiet)
     if workers < 1:
@@ -1030,6 +1030,3 @@ def _quiet_stops(hook):
             hook(unraisable)
     return quiet
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
