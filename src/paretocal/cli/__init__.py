@@ -18,23 +18,9 @@ import click
 import typer
 
 from ..errors import MESSAGE_CHARS, STOP, InputError, ParetocalError, SettingsError, excerpt
-
-# Options shared by several commands, declared once.
-Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
-Force = Annotated[bool, typer.Option(
-    "--force", help="Write into --out even when it is a folder of other files (those of the "
-                    "same names are replaced).")]
-Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Errors only.")]
-Frames = Annotated[Optional[str], typer.Option("--frames", help="Frames: '0:10', '0,3,7' or stems.")]
-ConfigFile = Annotated[Optional[Path], typer.Option("--config",
-                                                    help="Settings file (YAML/JSON) by section.")]
-Seed = Annotated[Optional[int], typer.Option("--seed", help="Random seed (default 0).")]
-CameraOrConfig = Annotated[Optional[int], typer.Option(
-    "--camera", help="KITTI camera index 0-3 (default 2).")]
-Camera = Annotated[int, typer.Option("--camera", help="KITTI camera index 0-3.")]
-CameraOrName = Annotated[Optional[str], typer.Option(
-    "--camera", help="KITTI camera index 0-3 (default 2), or the name of one camera of a rig "
-                     "folder (calib.yaml with cameras:).")]
+from ._common import STOP_HANDLER, StageProgress, fmt_err, report, setup_logging
+from .options import (Camera, CameraOrConfig, CameraOrName, ConfigFile, Force, Frames, Quiet, Seed,
+                      Verbose)
 
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -85,91 +71,6 @@ else:
     Cost = _choices("objective", "cost", "Cost")
     Evaluator = _choices("objective", "evaluator", "Evaluator")
     Wide = _choices("search", "wide", "Wide")
-
-
-def _setup_logging(verbose: bool, quiet: bool) -> None:
-    level = logging.INFO if verbose else logging.ERROR if quiet else logging.WARNING
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("paretocal: %(levelname)s: %(message)s"))
-    root = logging.getLogger("paretocal")
-    root.handlers[:] = [handler]
-    root.setLevel(level)
-    root.propagate = False
-
-
-class _Progress:
-    """A command's progress on stderr: rich bars on a terminal; on anything else (a pipe, a log
-    file, CI) one line per stage as it begins, with the time since the command started, so
-    that a long run shows where it is; nothing with ``--quiet``.
-
-    Called as ``progress(stage, done, total)``. The pipeline's phases without a count of
-    their own (``paretocal.pipeline.PHASES``: loading, locating the LiDAR, ...) report
-    ``(phase, 0, 1)`` and ``(phase, 1, 1)``: a line each, no bar."""
-
-    LABELS = {"features": "features", "search": "NSGA-II generations", "polish": "polish"}
-    #: What the line of a counted stage says, ``{total}`` its count.
-    LINES = {"features": "extracting features ({total} frames)",
-             "search": "searching ({total} NSGA-II generations)",
-             "polish": "polishing the front",
-             "check": "checking the extrinsic", "depth maps": "writing {total} depth maps",
-             "frames": "writing the frames ({total} files)",
-             "entries": "running {total} entries"}
-
-    def __init__(self, quiet: bool, stream=None):
-        self.stream = stream if stream is not None else sys.stderr
-        self.mode = None if quiet else "bars" if self.stream.isatty() else "lines"
-        self.bar = None
-        self.tasks: dict[str, Any] = {}         # rich's task ids by stage
-        self.stage: str | None = None
-
-    def __enter__(self):
-        import time
-
-        self.t0 = time.perf_counter()
-        if self.mode == "bars":
-            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                       TimeElapsedColumn)
-            self.bar = Progress(TextColumn("{task.description:<22}"), BarColumn(),
-                                MofNCompleteColumn(), TimeElapsedColumn(), transient=False)
-            self.bar.__enter__()
-        return self
-
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        if self.mode == "lines":
-            self._line(stage, total)
-        if self.bar is None or (stage not in self.LABELS and stage in _phases()):
-            return
-        if stage not in self.tasks:
-            self.tasks[stage] = self.bar.add_task(self.LABELS.get(stage, stage), total=total)
-        self.bar.update(self.tasks[stage], completed=done, total=total)
-
-    def _line(self, stage: str, total: int) -> None:
-        """One line when a new stage begins (a stage reports many times)."""
-        import time
-
-        if stage == self.stage:
-            return
-        self.stage = stage
-        text = self.LINES.get(stage) or _phases().get(stage) or stage
-        print(f"paretocal: {time.perf_counter() - self.t0:7.1f} s  {text.format(total=total)}",
-              file=self.stream, flush=True)
-
-    def __exit__(self, *exc):
-        if self.bar is not None:
-            self.bar.__exit__(*exc)
-
-
-def _phases() -> dict:
-    """The pipeline's phases and what the run does in each (``paretocal.pipeline.PHASES``)."""
-    from ..pipeline import PHASES
-
-    return PHASES
-
-
-def _fmt_err(e: dict | None) -> str:
-    if not e:
-        return "n/a"
-    return f"{e['rotation_deg']:.3f} deg / {e['translation_cm']:.2f} cm"
 
 
 def _fmt_axes(e: dict) -> str:
@@ -242,7 +143,7 @@ def calibrate(
     from ..config import load_settings
     from ..io import load_frames
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if resume is not None:
         given = {"SOURCE": source, "--out": out, "--init": init, "--frames": frames,
                  "--seed": seed, "--pop": pop, "--gens": gens, "--camera": camera,
@@ -374,19 +275,19 @@ def _calibrate_rig(source: Path, out: Path, init, camera: str | None, frames, se
         verdict = None if result.reliability is None else result.reliability.verdict
         what = f"cameras {', '.join(names)} at once" if joint else f"camera {name}"
         typer.echo(f"paretocal: {what}: {len(result.frames)} frames, chosen n = "
-                   f"{result.n_points}; error vs reference: {_fmt_err(ref)}; verdict "
+                   f"{result.n_points}; error vs reference: {fmt_err(ref)}; verdict "
                    f"{verdict}; wrote {out / (JOINT_RUN if joint else name)}")
         if verdict != "ok":
             unreliable.append(name)
 
     try:
-        with _Progress(quiet) as progress:
+        with StageProgress(quiet) as progress:
             summary = calibrate_rig(source, out, settings, T_inits,
                                     [camera] if camera is not None else None, figures,
                                     checkpoint_every, progress, on_camera=said,
                                     dataset_options=dataset_options, joint=joint)
     except Interrupted as exc:
-        _report(interrupted_line(exc, exc.run_dir if exc.run_dir is not None else out))
+        report(interrupted_line(exc, exc.run_dir if exc.run_dir is not None else out))
         raise typer.Exit(130) from None
     for pair in summary["pairs"]:
         typer.echo(f"paretocal: {pair_line(pair)}")
@@ -405,7 +306,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
     from ..rundir import calibrate_run, resume_run, run_arguments
 
     try:
-        with _Progress(quiet) as progress:
+        with StageProgress(quiet) as progress:
             if resume:
                 recorded = run_arguments(out)
                 result = resume_run(out, checkpoint_every, progress=progress)
@@ -418,7 +319,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                                        figures=figures, checkpoint_every=checkpoint_every,
                                        progress=progress, dataset_options=dataset_options)
     except Interrupted as exc:
-        _report(interrupted_line(exc, out))
+        report(interrupted_line(exc, out))
         raise typer.Exit(130) from None
     ref = result.reference_error
     typer.echo(f"paretocal: {len(result.frames)} frames, {result.evaluations} evaluations in "
@@ -426,7 +327,7 @@ def _run_calibration(loaded, source, T_init, settings, out: Path, figures: bool,
                f"chamfer {result.objectives()['chamfer']:.4f}, "
                f"{result.objectives()['ms']:.4g} ms/eval modelled "
                f"({result.decision.measured_ms:.4g} measured now); "
-               f"error vs reference: {_fmt_err(ref)}; "
+               f"error vs reference: {fmt_err(ref)}; "
                f"wrote {out}")
     from ..verdict import interval_text
 
@@ -517,7 +418,7 @@ def perturb(
         f"{p[0]:+.3f} {p[1]:+.3f} {p[2]:+.3f} m, yaw pitch roll = {p[3]:+.2f} {p[4]:+.2f} "
         f"{p[5]:+.2f} deg\n"
         f"error vs reference: {e['rotation_deg']:.3f} deg, {e['translation_cm']:.2f} cm"))
-    typer.echo(f"paretocal: wrote {out} ({_fmt_err({k: float(v) for k, v in e.items()})} "
+    typer.echo(f"paretocal: wrote {out} ({fmt_err({k: float(v) for k, v in e.items()})} "
                "from the reference)")
 
 
@@ -562,7 +463,7 @@ def check(
     from ..io import load_frames
     from ..io.atomic import atomic_write_text, check_output_file
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if rot_tol <= 0 or trans_tol <= 0:
         raise SettingsError("--rot-tol and --trans-tol must be positive")
     if out is not None:
@@ -576,7 +477,7 @@ def check(
         if T is None:
             raise ParetocalError(f"{source}: the dataset has no extrinsic of its own "
                                  "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
-    with _Progress(quiet) as progress:
+    with StageProgress(quiet) as progress:
         r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
     r = r.with_source(str(extrinsic) if extrinsic is not None else "dataset")
     if out is not None:
@@ -616,7 +517,7 @@ def compare(
     from ..io.atomic import atomic_write_text, check_output_file
     from ..io.extrinsic import needs_kitti_rect
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
@@ -628,7 +529,7 @@ def compare(
     loaded = load_frames(source, frames, camera) if source is not None else None
     T_a = read_init(a, loaded, camera)
     T_b = read_init(b, loaded, camera)
-    with _Progress(quiet or loaded is None) as progress:
+    with StageProgress(quiet or loaded is None) as progress:
         c = compare_extrinsics(T_a, T_b, loaded, settings, progress=progress)
     if out is not None:
         atomic_write_text(out, json.dumps(c.to_dict(), indent=2) + "\n")
@@ -692,7 +593,7 @@ def study(
 
     from ..io.atomic import check_output_dir, check_own_folder
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     check_output_dir(out)
     if not force:
         check_own_folder(out, STUDY_MARKS, "study")
@@ -707,13 +608,13 @@ def study(
     from ..io import read_init
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
-    with _Progress(quiet) as progress:
+    with StageProgress(quiet) as progress:
         doc = run_study(loaded, out, T_init, settings, plan, progress=progress)
     cal = doc["calibration"]
     rb = doc["robustness"]
     typer.echo(f"paretocal: study of {len(doc['frames'])} frames in "
                f"{doc['timings_s']['total']:.0f} s; chosen n = {cal['n_points']}, error vs "
-               f"reference {_fmt_err(cal['reference_error'])}; best w1 = {rb['best_w1']}; "
+               f"reference {fmt_err(cal['reference_error'])}; best w1 = {rb['best_w1']}; "
                f"wrote {out / 'report.html'}")
 
 
@@ -736,7 +637,7 @@ def depth(
 
     from ..io.atomic import check_output_dir
 
-    _setup_logging(False, quiet)
+    setup_logging(False, quiet)
     if max_depth <= 0:
         raise SettingsError("--max-depth must be positive")
     check_output_dir(out)
@@ -745,7 +646,7 @@ def depth(
     T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
-    with _Progress(quiet) as progress:
+    with StageProgress(quiet) as progress:
         for k, f in enumerate(loaded):
             write_depth(f, T, out, max_depth=max_depth)
             progress("depth maps", k + 1, len(loaded))
@@ -787,7 +688,7 @@ def extract(
     from ..extract import REPORT, choose_topics, extract_bag
     from ..io import read_extrinsic
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if image_topic is None or cloud_topic is None:
         pick = choose_topics(bag, image_topic, cloud_topic)
         if pick.image_topic is None or pick.cloud_topic is None:
@@ -800,7 +701,7 @@ def extract(
     entries = _calib_entries(calib) if calib is not None else {}
     if init is not None:
         entries["T_cam_lidar"] = read_extrinsic(init)
-    with _Progress(quiet) as progress:
+    with StageProgress(quiet) as progress:
         r = extract_bag(bag, out, image_topic, cloud_topic, camera_info_topic, max_dt=max_dt,
                         every=every, limit=limit, calib=entries, progress=progress)
     c, dt = r["counts"], r["dt_ms"]
@@ -872,7 +773,7 @@ def batch(
 
     from ..io.atomic import check_output_dir, check_own_folder
 
-    _setup_logging(verbose, quiet)
+    setup_logging(verbose, quiet)
     if workers < 1:
         raise SettingsError("--workers must be at least 1")
     check_output_dir(out)
@@ -881,13 +782,13 @@ def batch(
     settings = load_settings(config).replace(search={"pop": pop, "gens": gens, "seed": seed})
     settings.validate()
     try:
-        with _Progress(quiet) as progress:
+        with StageProgress(quiet) as progress:
             r = run_batch(manifest, out, settings, scheduler, workers, check, figures,
                           progress=lambda d, t: progress("entries", d, t),
                           dataset_options=not states_init_error(config))
     except BatchInterrupted as exc:
-        _report(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done "
-                f"(summary so far in {exc.summary}); rerun the same command to continue")
+        report(f"paretocal: batch interrupted: {exc.done} of {exc.total} entries done "
+               f"(summary so far in {exc.summary}); rerun the same command to continue")
         raise typer.Exit(130) from None
     rate = f", {r['entries_per_minute']:.2f} entries/min" if r["entries_per_minute"] else ""
     typer.echo(f"paretocal: {r['entries']} entries: {r['ok']} ok, {r['failed']} failed, "
@@ -923,40 +824,17 @@ _INTERRUPTED = {
 }
 
 
-class _Stop:
-    """SIGINT and SIGTERM handler: the first signal raises KeyboardInterrupt (the run stops and
-    saves what it has) and records the request (``errors.STOP``: should library code swallow
-    the exception, the run stops at its next phase or generation); later signals only say so,
-    so that saving is not cut short."""
-
-    def __init__(self):
-        self.signals = 0
-        self.reported = False
-
-    def __call__(self, signum, frame):
-        self.signals += 1
-        if self.signals == 1:
-            STOP.request()
-            raise KeyboardInterrupt
-        import os
-
-        os.write(2, b"paretocal: stopping, saving what the run has (kill -9 to abort at once)\n")
-
-
-_STOP = _Stop()
-
-
-def _report(line: str) -> None:
-    """Print the one line that says how an interrupted command ended."""
-    print(line, file=sys.stderr)
-    _STOP.reported = True
+#: The SIGINT and SIGTERM handler that :func:`main` installs.
+_STOP = STOP_HANDLER
+#: The progress display under its name from before (the tests use it).
+_Progress = StageProgress
 
 
 def _interrupted(command: str | None) -> int:
     if not _STOP.reported:
         default = "interrupted; run the command again"
         said = default if command is None else _INTERRUPTED.get(command, default)
-        _report(f"paretocal: {said}")
+        report(f"paretocal: {said}")
     return 130
 
 
