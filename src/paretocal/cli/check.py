@@ -1,0 +1,86 @@
+"""``paretocal check``: whether an extrinsic is calibrated for a dataset, without ground truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from ..errors import ParetocalError, SettingsError
+from . import app
+from ._common import StageProgress, setup_logging
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+
+
+@app.command()
+def check(
+    source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
+    extrinsic: Annotated[Optional[Path], typer.Option(
+        help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
+    frames: Frames = None,
+    camera: Camera = 2,
+    out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
+    rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
+    trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
+    config: ConfigFile = None,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
+) -> None:
+    """Say whether an extrinsic (--extrinsic, or the dataset's own) is calibrated for SOURCE,
+    without ground truth."""
+    import json
+
+    from ..check import check_extrinsic
+    from ..config import load_settings
+    from ..io import load_frames
+    from ..io.atomic import atomic_write_text, check_output_file
+
+    setup_logging(verbose, quiet)
+    if rot_tol <= 0 or trans_tol <= 0:
+        raise SettingsError("--rot-tol and --trans-tol must be positive")
+    if out is not None:
+        check_output_file(out)
+    settings = load_settings(config)
+    from ..io import read_init
+    T = read_init(extrinsic, source, camera) if extrinsic is not None else None
+    loaded = load_frames(source, frames, camera)
+    if T is None:
+        T = loaded[0].T_ref
+        if T is None:
+            raise ParetocalError(f"{source}: the dataset has no extrinsic of its own "
+                                 "(T_cam_lidar in calib.yaml); pass --extrinsic FILE")
+    with StageProgress(quiet) as progress:
+        r = check_extrinsic(loaded, T, settings, rot_tol, trans_tol, progress=progress)
+    r = r.with_source(str(extrinsic) if extrinsic is not None else "dataset")
+    if out is not None:
+        atomic_write_text(out, json.dumps(r.to_dict(), indent=2) + "\n")
+    which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
+    typer.echo(f"paretocal: {which}: {r.verdict.upper()} (score {r.score:.2f}; the local "
+               f"optimum is {r.moved_deg:.3f} deg / {100 * r.moved_m:.2f} cm / "
+               f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
+               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
+    typer.echo(f"paretocal: {features_line(r.features)}")
+    for note in r.notes:
+        typer.echo(f"paretocal: WEAK CHECK: {note}")
+
+
+def features_line(features: dict) -> str:
+    """What the objective compared, in one line: the feature points per frame by group, the
+    rings, and the frames whose depth edges look like noise (``stage.feature_counts``)."""
+    mean = features["per_frame_mean"]
+    rings = features["rings"]
+    ring_text = ("no rings" if not rings else
+                 f"{'/'.join(str(r) for r in rings)} rings")
+    rec = features.get("ring_recovery")
+    if rec:
+        ring_text += f" ({', '.join(rec['methods'])}, purity >= {rec['min_purity']:.2f})"
+    line = (f"features per frame: {mean['depth_edge']:g} depth edges, "
+            f"{mean['intensity_edge']:g} intensity edges, {mean['smooth']:g} smooth points "
+            f"in view; {ring_text}; {features['frames_contributing']} of "
+            f"{len(features['per_frame'])} frames contribute")
+    noise = features["noise"]
+    if noise:
+        line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
+                 f"{noise[0]['frame']}: {noise[0]['reason']})")
+    return line

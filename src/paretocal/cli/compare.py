@@ -1,0 +1,64 @@
+"""``paretocal compare``: two extrinsics against each other, and which one a dataset prefers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from ..errors import InputError
+from . import app
+from ._common import StageProgress, setup_logging
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+
+
+@app.command()
+def compare(
+    a: Annotated[Path, typer.Argument(help="Extrinsic A (any --init form: YAML/JSON with "
+                                           "T_cam_lidar, a result.json, a KITTI calibration "
+                                           "file with SOURCE).")],
+    b: Annotated[Path, typer.Argument(help="Extrinsic B, in any of the same forms.")],
+    source: Annotated[Optional[Path], typer.Argument(
+        help="Dataset folder: also say which of the two its frames prefer.")] = None,
+    frames: Frames = None,
+    camera: Camera = 2,
+    out: Annotated[Optional[Path], typer.Option(help="Write the comparison (JSON) here.")] = None,
+    config: ConfigFile = None,
+    verbose: Verbose = False,
+    quiet: Quiet = False,
+) -> None:
+    """Compare two extrinsics: B relative to A per axis in A's LiDAR frame, as an angle and a
+    distance, and with SOURCE which one the frames prefer (the verdict's paired test)."""
+    import json
+
+    from ..check import compare_extrinsics
+    from ..config import load_settings
+    from ..io import load_frames, read_init
+    from ..io.atomic import atomic_write_text, check_output_file
+    from ..io.extrinsic import needs_kitti_rect
+
+    setup_logging(verbose, quiet)
+    if out is not None:
+        check_output_file(out)
+    settings = load_settings(config)
+    for path in (a, b):
+        if source is None and needs_kitti_rect(path):
+            raise InputError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
+                             "camera 0); pass the KITTI SOURCE it belongs to, whose "
+                             "rectification turns it into T_cam_lidar")
+    loaded = load_frames(source, frames, camera) if source is not None else None
+    T_a = read_init(a, loaded, camera)
+    T_b = read_init(b, loaded, camera)
+    with StageProgress(quiet or loaded is None) as progress:
+        c = compare_extrinsics(T_a, T_b, loaded, settings, progress=progress)
+    if out is not None:
+        atomic_write_text(out, json.dumps(c.to_dict(), indent=2) + "\n")
+    d = c.to_dict()["correction"]
+    typer.echo(f"paretocal: B = A @ D, in A's LiDAR frame: x {d['x_cm']:+.2f} cm, y "
+               f"{d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw {d['yaw_deg']:+.3f} deg, "
+               f"pitch {d['pitch_deg']:+.3f} deg, roll {d['roll_deg']:+.3f} deg")
+    typer.echo(f"paretocal: {c.rotation_deg:.3f} deg / {100 * c.translation_m:.2f} cm apart"
+               + ("" if c.pixels is None else f", {c.pixels:.1f} px in the images"))
+    if c.prefer is not None:
+        typer.echo(f"paretocal: on {len(c.frames)} frame(s) of {source}: {c.reason}")
