@@ -338,6 +338,13 @@ class TestCompare:
         assert doc["prefer"] in ("A", "B", "neither") and doc["pixels"] > 0
         assert stdout.strip().splitlines()[-1] == (f"paretocal: on 3 frame(s) of {raw_date}: "
                                                    f"{doc['reason']}")
+        # The page of both on every frame (its contents: tests/test_interactive.py).
+        page = tmp_path / "compare.html"
+        code, _, err = _run(capsys, "compare", ref, result, raw_date, "--frames", "0:3",
+                            "--page", page, "--quiet")
+        assert code == 0, err
+        text = page.read_text(encoding="utf-8")
+        assert 'id="paretocal-data"' in text and text.count('data-view="') == 2
 
     def test_a_clear_difference_is_preferred_and_a_tie_is_not(self, raw_date):
         """2 deg of yaw off the reference: every frame prefers the reference; the reference
@@ -361,4 +368,6 @@ class TestCompare:
         assert code == 2 and "none.yaml: file not found" in err
         code, _, err = _run(capsys, "compare", raw_date / "calib_velo_to_cam.txt", init)
         assert code == 2 and "pass the KITTI SOURCE it belongs to" in err
+        code, _, err = _run(capsys, "compare", init, init, "--page", tmp_path / "p.html")
+        assert code == 2 and "--page needs SOURCE" in err and not (tmp_path / "p.html").exists()
         assert "Traceback" not in err

@@ -331,6 +331,9 @@ class Comparison:
     frame_scores : ndarray, shape (2, F), or None
         The edge objective of each frame alone at A (row 0) and at B (row 1), with the points
         A sees (px, lower is better; NaN for a frame with none); None without frames.
+    sweeps : tuple of Frame
+        The frames as compared (de-skewed when the motion was compensated), for the page
+        (:func:`paretocal.report.interactive.write_comparison`); not in JSON.
     """
 
     T_a: np.ndarray
@@ -345,7 +348,6 @@ class Comparison:
     reason: str = ""
     frames: tuple = ()
     frame_scores: np.ndarray | None = None
-    #: The frames as compared (de-skewed when the motion was compensated); not in JSON.
     sweeps: tuple = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict:

@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from ..errors import InputError
+from ..errors import InputError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
 from .options import Camera, ConfigFile, Frames, Quiet, Verbose
@@ -24,6 +24,9 @@ def compare(
     frames: Frames = None,
     camera: Camera = 2,
     out: Annotated[Optional[Path], typer.Option(help="Write the comparison (JSON) here.")] = None,
+    page: Annotated[Optional[Path], typer.Option(
+        help="With SOURCE: write a page (HTML) showing every frame with both extrinsics' "
+             "projections, to judge by eye.")] = None,
     config: ConfigFile = None,
     verbose: Verbose = False,
     quiet: Quiet = False,
@@ -39,8 +42,11 @@ def compare(
     from ..io.extrinsic import needs_kitti_rect
 
     setup_logging(verbose, quiet)
-    if out is not None:
-        check_output_file(out)
+    if page is not None and source is None:
+        raise SettingsError("--page needs SOURCE: the page shows its frames")
+    for path in (out, page):
+        if path is not None:
+            check_output_file(path)
     settings = load_settings(config)
     for path in (a, b):
         if source is None and needs_kitti_rect(path):
@@ -54,6 +60,10 @@ def compare(
         c = compare_extrinsics(T_a, T_b, loaded, settings, progress=progress)
     if out is not None:
         atomic_write_text(out, json.dumps(c.to_dict(), indent=2) + "\n")
+    if page is not None:
+        from ..report.interactive import write_comparison
+
+        write_comparison(c, list(c.sweeps), settings, page)
     d = c.to_dict()["correction"]
     typer.echo(f"paretocal: B = A @ D, in A's LiDAR frame: x {d['x_cm']:+.2f} cm, y "
                f"{d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw {d['yaw_deg']:+.3f} deg, "
