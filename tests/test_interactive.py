@@ -659,3 +659,50 @@ def test_comparison_page_in_browser(tmp_path, raw_frames):
             page.close()
         finally:
             browser.close()
+
+
+def test_pandaset_page_in_browser(request, tmp_path, data):
+    """A PandaSet run's page (1920 x 1080 images, a cloud in a vehicle frame): every frame,
+    each layer and the front's solutions draw, no console error; within the page's budget
+    (fewer frames take more of it each; measured: 2.84 MB for 20 front frames)."""
+    sync_playwright = _require_browser()
+    root = data / "pandaset" / "front"
+    if not (root / "calib.yaml").is_file():
+        pytest.skip("PandaSet sample not present")
+    from paretocal.io import load_frames
+
+    frames = load_frames(root, "0:3")
+    T_init = frames[0].T_ref @ correction_matrix(np.array([0.05, -0.03, 0.02, 1, -1, 0.5]))
+    settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
+    result = calibrate(frames, T_init, settings)
+    path = write_interactive(result, result.sweeps, tmp_path / "interactive.html")
+    assert path.stat().st_size < 3_000_000
+    page_data = _page_data(path.read_text(encoding="utf-8"))
+    assert [e["name"] for e in page_data["frames"]] == result.frames
+    assert all(e["image"]["width"] <= 1280 for e in page_data["frames"])
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS, headless=True)
+        try:
+            page, errors, failed, urls = _open(browser, path)
+            assert page.locator("#frames button").count() == 3
+            snaps = []
+            for k in range(3):
+                page.locator("#frames button").nth(k).click()
+                _wait_attr(page, "frame", result.frames[k])
+                page.evaluate(SNAP_JS, f"f{k}")
+                snaps.append(f"f{k}")
+            assert page.evaluate(DIFF_JS, ["f0", "f2"]) > 50_000
+            for colour in ("intensity", "groups", "none", "depth"):
+                page.check(f"#colour-{colour}")
+                _wait_attr(page, "colour", colour)
+            page.check("#layer-edges")
+            _wait_attr(page, "layers", "image+edges")
+            page.evaluate(SNAP_JS, "edges")
+            assert page.evaluate(DIFF_JS, ["f2", "edges"]) > 1000
+            page.click("#view-initial")
+            page.wait_for_function("document.getElementById('view-initial').className === 'active'")
+            assert not errors, f"console errors: {errors}"
+            assert not failed and all(u.startswith(("file:", "data:")) for u in urls), urls
+            page.close()
+        finally:
+            browser.close()
