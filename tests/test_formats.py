@@ -835,10 +835,11 @@ def test_the_kitti_credit_only_on_kitti_frames(tmp_path, raw_frames):
                                      extra={"credit": ["x"]}))
 
 
-def test_the_readmes_calib_examples_load(tmp_path, raw_frames):
-    """Every calib.yaml example of the README's *Preparing your data* loads as a folder."""
-    text = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
-    part = text[text.index("## Preparing your data"):text.index("## Calibrating your own data")]
+def test_the_docs_calib_examples_load(tmp_path, raw_frames):
+    """Every calib.yaml example of *Preparing your data* (docs/preparing-data.md, section
+    "calib.yaml for one camera") loads as a folder."""
+    text = (Path(__file__).parents[1] / "docs" / "preparing-data.md").read_text(encoding="utf-8")
+    part = text[text.index("### calib.yaml for one camera"):text.index("### Camera models")]
     blocks = re.findall(r"```yaml\n(.*?)```", part, re.S)
     assert len(blocks) == 3
     f = raw_frames[0]
