@@ -707,6 +707,35 @@ def test_the_motion_report_is_written_as_before():
     json.dumps(done, allow_nan=False)
 
 
+def test_the_inputs_report_is_written_as_before():
+    """result.json's ``inputs``: the fields, the notes, the camera model, the pose as nested
+    lists and the mask, then where the pose came from and each sweep's rings when given;
+    read back, the same JSON."""
+    from paretocal.inputs import InputsReport, RingBrief
+
+    pose = np.eye(4)
+    pose[:3, 3] = [0.1, -0.2, 1.7]
+    report = InputsReport(point_fields={"intensity": "intensity", "ring": None},
+                          notes=("no time field",), camera_model="fisheye", lidar_pose=pose,
+                          mask=True, lidar_pose_source={"source": "cloud origin"},
+                          rings=(("a", RingBrief("scan", 64, 0.9931)),
+                                 ("b", RingBrief("lines", 3, 0.4))))
+    doc = report.to_dict()
+    assert list(doc) == ["point_fields", "notes", "camera_model", "lidar_pose", "mask",
+                         "lidar_pose_source", "rings"]
+    assert doc["notes"] == ["no time field"] and doc["lidar_pose"] == pose.tolist()
+    assert doc["rings"] == [{"frame": "a", "method": "scan", "n_rings": 64, "purity": 0.9931},
+                            {"frame": "b", "method": "lines", "n_rings": 3, "purity": 0.4}]
+    text = json.dumps(doc, indent=2, allow_nan=False)
+    assert json.dumps(InputsReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
+    # Without a pose, its source or rings: null, and the last two not written.
+    bare = InputsReport(point_fields={}, notes=(), camera_model="pinhole", lidar_pose=None,
+                        mask=False).to_dict()
+    assert bare == {"point_fields": {}, "notes": [], "camera_model": "pinhole",
+                    "lidar_pose": None, "mask": False}
+    assert InputsReport.from_dict(bare).to_dict() == bare
+
+
 def test_clouds_without_time_are_not_deskewed(raw_frames):
     from paretocal.config import Settings
     from paretocal.inputs import compensate_motion
@@ -722,6 +751,14 @@ def _wide(photo=None, **over):
 
     return WideStart(np.eye(4), np.eye(4), photo=None if photo is None else PhotoCheck(**photo),
                      **over)
+
+
+def _counts(doc):
+    """The feature counts of a fake result (:class:`paretocal.stage.FeatureCounts`) from
+    their dict form, None when not given."""
+    from paretocal.stage import FeatureCounts
+
+    return None if doc is None else FeatureCounts.from_dict(doc)
 
 
 def _fake_result(**over):
@@ -743,7 +780,7 @@ def _fake_result(**over):
                         decision=Decision(rule="knee", deviation_px=0.0,
                                           basin=over.pop("basin", None)),
                         motion=over.pop("motion", None),
-                        feature_counts=over.pop("feature_counts", {}),
+                        feature_counts=_counts(over.pop("feature_counts", None)),
                         evidence=Evidence.from_dict(over.pop("evidence", {})),
                         wide=over.pop("wide", None),
                         settings=Settings().replace(search={"bound_t_m": 0.1, "bound_r_deg": 2.0,

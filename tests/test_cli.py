@@ -253,13 +253,14 @@ class TestCheck:
 
 def test_the_features_line_names_frames_whose_depth_edges_look_like_noise():
     from paretocal.cli import _features_line
+    from paretocal.stage import FeatureCounts
 
     features = {"per_frame_mean": {"depth_edge": 812.5, "intensity_edge": 90.0, "smooth": 1000.0},
                 "rings": [2, 64], "ring_recovery": {"methods": ["lines"], "min_purity": 0.0},
                 "frames_contributing": 2, "per_frame": [{}, {}],
                 "noise": [{"frame": "000028", "reason": "2 laser rings found (a spinning LiDAR "
                                                         "has at least 8)"}]}
-    line = _features_line(features)
+    line = _features_line(FeatureCounts.from_dict(features))
     assert "2/64 rings (lines, purity >= 0.00)" in line
     assert line.endswith("the depth edges of 1 frame(s) look like noise (frame 000028: 2 laser "
                          "rings found (a spinning LiDAR has at least 8))")

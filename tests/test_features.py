@@ -174,6 +174,31 @@ def test_equalize_brings_a_night_image_to_a_day_images_edges(data, raw_frames):
     assert e_night / n_night > 5.0 and e_day / n_day < 2.0
 
 
+def _feature_counts_dict(feats):
+    """The features as result.json wrote them from a plain dict, key for key."""
+    from paretocal.features.lidar import GROUP_NAMES
+    from paretocal.stage import depth_edges_doubtful
+    from paretocal.verdict import MIN_POINTS_PER_FRAME
+
+    per = [f.counts() for f in feats]
+    total = {g: int(sum(p[g] for p in per)) for g in GROUP_NAMES}
+    summaries = [f.rings for f in feats if f.rings]
+    ring_info = None if not summaries else {
+        "methods": sorted({s["method"] for s in summaries}),
+        "min_purity": min(s["purity"] for s in summaries),
+        "spacing_deg_median": summaries[0]["spacing_deg_median"]}
+    return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
+            "total": total, "rings": sorted({f.n_rings for f in feats}),
+            "ring_recovery": ring_info,
+            "frames_contributing": int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME for f in feats)),
+            "per_frame": [{"frame": f.name, **c,
+                           "rings": None if not f.rings else
+                           {k: f.rings[k] for k in ("method", "n_rings", "purity")}}
+                          for f, c in zip(feats, per)],
+            "noise": [{"frame": f.name, "reason": why} for f in feats
+                      if (why := depth_edges_doubtful(f.rings))]}
+
+
 def test_feature_counts_name_each_frame_and_the_noisy_ones(raw_frames):
     """result.json and check say how many features of each group every frame gave, with its
     rings, and which frames' depth edges are likely noise (rings that are not the lasers')."""
@@ -184,16 +209,54 @@ def test_feature_counts_name_each_frame_and_the_noisy_ones(raw_frames):
     frames = raw_frames[:2]
     stage = Stage(frames, frames[0].T_ref, frames[0].T_ref, Settings())
     good = feature_counts(stage.feats)
-    assert [p["frame"] for p in good["per_frame"]] == [f.name for f in frames]
-    for p, f in zip(good["per_frame"], stage.feats):
-        assert p["depth_edge"] == int((f.group == DEPTH_EDGE).sum()) > 0
-        assert p["rings"]["n_rings"] == 64 and p["rings"]["purity"] > 0.9
-    assert good["noise"] == []
+    assert good.to_dict() == _feature_counts_dict(stage.feats)
+    assert [p.frame for p in good.per_frame] == [f.name for f in frames]
+    for p, f in zip(good.per_frame, stage.feats):
+        assert p.depth_edge == int((f.group == DEPTH_EDGE).sum()) > 0
+        assert p.rings is not None and p.rings.n_rings == 64 and p.rings.purity > 0.9
+    assert good.noise == ()
     mixed = [replace(stage.feats[0], rings=dict(stage.feats[0].rings, n_rings=3)),
              replace(stage.feats[1], rings=dict(stage.feats[1].rings, purity=0.4))]
-    noise = feature_counts(mixed)["noise"]
-    assert [n["frame"] for n in noise] == [f.name for f in frames]
-    assert "3 laser rings" in noise[0]["reason"] and "40 %" in noise[1]["reason"]
+    noise = feature_counts(mixed).noise
+    assert [n.frame for n in noise] == [f.name for f in frames]
+    assert "3 laser rings" in noise[0].reason and "40 %" in noise[1].reason
+
+
+def test_feature_counts_are_written_as_before():
+    """result.json's ``features``: the keys in their order, the nested records as dicts, the
+    tuples as lists; read back, the same JSON."""
+    import json
+
+    from paretocal.inputs import RingBrief
+    from paretocal.stage import FeatureCounts, FrameCounts, NoiseNote, RingRecovery
+
+    rings = RingBrief(method="scan", n_rings=64, purity=0.9931)
+    counts = FeatureCounts(
+        per_frame_mean={"depth_edge": 406.0, "intensity_edge": 6.5, "smooth": 700.0},
+        total={"depth_edge": 812, "intensity_edge": 13, "smooth": 1400}, rings=(3, 64),
+        ring_recovery=RingRecovery(methods=("lines", "scan"), min_purity=0.4,
+                                   spacing_deg_median=0.4214),
+        frames_contributing=2,
+        per_frame=(FrameCounts("a", 800, 12, 700, rings), FrameCounts("b", 12, 1, 700)),
+        noise=(NoiseNote("b", "3 laser rings found"),))
+    doc = counts.to_dict()
+    assert list(doc) == ["per_frame_mean", "total", "rings", "ring_recovery",
+                         "frames_contributing", "per_frame", "noise"]
+    assert doc["rings"] == [3, 64] and doc["frames_contributing"] == 2
+    assert doc["ring_recovery"] == {"methods": ["lines", "scan"], "min_purity": 0.4,
+                                    "spacing_deg_median": 0.4214}
+    assert doc["per_frame"] == [
+        {"frame": "a", "depth_edge": 800, "intensity_edge": 12, "smooth": 700,
+         "rings": {"method": "scan", "n_rings": 64, "purity": 0.9931}},
+        {"frame": "b", "depth_edge": 12, "intensity_edge": 1, "smooth": 700, "rings": None}]
+    assert doc["noise"] == [{"frame": "b", "reason": "3 laser rings found"}]
+    assert [p.edges for p in counts.per_frame] == [812, 13]
+    text = json.dumps(doc, indent=2)
+    back = FeatureCounts.from_dict(json.loads(text))
+    assert back == counts and json.dumps(back.to_dict(), indent=2) == text
+    # No rings recovered: written as null.
+    assert FeatureCounts.from_dict(dict(doc, ring_recovery=None)).to_dict()["ring_recovery"] \
+        is None
 
 
 def test_sampling_px_is_the_lidars_step_seen_in_the_image():

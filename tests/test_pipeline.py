@@ -130,11 +130,11 @@ def test_frames_without_points_in_view_do_not_count(raw_frames):
     frames = [raw_frames[0]] + [dataclasses.replace(f, points=f.points[::2000])
                                 for f in raw_frames[1:3]]
     r = calibrate(frames, raw_frames[0].T_ref, _small())
-    assert r.feature_counts["frames_contributing"] == 1
+    assert r.feature_counts.frames_contributing == 1
     assert r.reliability.verdict == "unreliable"
     assert any("only 1 of the 3 frames have LiDAR feature points" in x
                for x in r.reliability.reasons)
     # The clean frames count in full.
     ok = calibrate(raw_frames[:3], raw_frames[0].T_ref, _small())
-    assert ok.feature_counts["frames_contributing"] == 3
+    assert ok.feature_counts.frames_contributing == 3
     assert not any("frames have LiDAR feature points" in x for x in ok.reliability.reasons)

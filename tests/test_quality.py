@@ -107,6 +107,7 @@ def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
 
     from paretocal.check import NEIGHBOUR_STEP, CheckReport
     from paretocal.geometry import correction_matrix, pose_error
+    from paretocal.stage import FeatureCounts
 
     q = quality_report(bowls, np.r_[bowls.m.mean(axis=0), 100.0])
     T = correction_matrix([0.1, -0.2, 0.3, 1.0, 2.0, -3.0])
@@ -115,7 +116,7 @@ def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
                     tolerance_m=0.07, moved_px=2.7, neighbour_fraction=0.01,
                     best_neighbour_gain_px=0.002, neighbour_step=NEIGHBOUR_STEP, T_checked=T,
                     T_local_optimum=T_opt, quality=q, frames=("a", "b", "c"),
-                    features={"frames_contributing": 3})
+                    features=FeatureCounts.from_dict({"frames_contributing": 3}))
     e = pose_error(T_opt, T)
     assert not r.weak and r.moved_deg == pytest.approx(float(e["rotation_deg"]))
     assert r.moved_m == pytest.approx(float(e["translation_cm"]) / 100)

@@ -22,6 +22,7 @@ from .geometry import pose_error
 from .io.frame import Frame
 from .quality import (Quality, displacement_px, local_optimum, neighbour_fraction,
                       pixel_fd_step, quality_report)
+from .stage import FeatureCounts
 
 NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
 
@@ -67,7 +68,7 @@ class CheckReport:
         The quality report at the local optimum.
     frames : tuple of str
         The frames' names.
-    features : dict
+    features : FeatureCounts
         What the objective compared (:func:`paretocal.stage.feature_counts`).
     extrinsic_from : str or None
         Where the extrinsic checked came from (``paretocal check``: its file, or
@@ -87,7 +88,7 @@ class CheckReport:
     T_local_optimum: np.ndarray
     quality: Quality
     frames: tuple[str, ...]
-    features: dict[str, Any]
+    features: FeatureCounts
     extrinsic_from: str | None = None
 
     @property
@@ -131,7 +132,7 @@ class CheckReport:
             "T_local_optimum": np.asarray(self.T_local_optimum).tolist(),
             "quality": self.quality.to_dict(),
             "frames": list(self.frames),
-            "features": self.features,
+            "features": self.features.to_dict(),
         }
         if self.extrinsic_from is not None:
             out["extrinsic_from"] = self.extrinsic_from
@@ -161,7 +162,7 @@ class CheckReport:
                    T_local_optimum=np.array(doc["T_local_optimum"], dtype=np.float64),
                    quality=Quality.from_dict(doc.get("quality") or {}),
                    frames=tuple(str(f) for f in doc.get("frames") or []),
-                   features=dict(doc.get("features") or {}),
+                   features=FeatureCounts.from_dict(doc.get("features") or {}),
                    extrinsic_from=doc.get("extrinsic_from"))
 
     def with_source(self, extrinsic_from: str) -> "CheckReport":

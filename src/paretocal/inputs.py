@@ -286,26 +286,126 @@ def warn_rings(frames: list[Frame], rings: list[Rings]) -> None:
                     len(bad), len(frames), hint)
 
 
+@dataclasses.dataclass(frozen=True)
+class RingBrief:
+    """The laser rings recovered in one sweep, in brief.
+
+    Attributes
+    ----------
+    method : str
+        How they were recovered (``"field"``, ``"scan"``, ``"elevation"``, ``"lines"``; see
+        :func:`paretocal.features.prepare.frame_rings`).
+    n_rings : int
+        How many rings.
+    purity : float
+        The share of the returns near the view that lie on their ring's cone (0 to 1, to 4
+        decimals).
+    """
+
+    method: str
+    n_rings: int
+    purity: float
+
+    def to_dict(self) -> dict:
+        """``{"method", "n_rings", "purity"}``, as result.json writes a sweep's rings."""
+        return {"method": self.method, "n_rings": self.n_rings, "purity": self.purity}
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "RingBrief":
+        """The brief read back from its :meth:`to_dict` form (or a fuller ring summary,
+        :meth:`paretocal.lidar.rings.Rings.summary`, whose other keys it ignores)."""
+        return cls(method=str(doc["method"]), n_rings=int(doc["n_rings"]),
+                   purity=float(doc["purity"]))
+
+
+@dataclasses.dataclass(frozen=True)
+class InputsReport:
+    """What the inputs offered (:func:`describe_inputs`; result.json ``inputs``).
+
+    Attributes
+    ----------
+    point_fields : dict
+        The point-cloud fields that gave intensity, ring and time, as the reader named them
+        (its notes taken out, into :attr:`notes`).
+    notes : tuple of str
+        The reader's notes over every frame, sorted, each once.
+    camera_model : str
+        The first frame's camera model (``"pinhole"``, ``"fisheye"``, ...).
+    lidar_pose : ndarray, shape (4, 4), or None
+        The first frame's LiDAR pose in its cloud's frame (m); None when the clouds are in
+        the LiDAR's frame.
+    mask : bool
+        Whether the first frame has an image mask.
+    lidar_pose_source : dict or None
+        Where the LiDAR pose came from (:func:`locate_lidar`); None when not given (and then
+        not written).
+    rings : tuple of (str, RingBrief) or None
+        Each frame's name and its sweep's rings; None when not given (and then not written).
+    """
+
+    point_fields: dict
+    notes: tuple[str, ...]
+    camera_model: str
+    lidar_pose: np.ndarray | None
+    mask: bool
+    lidar_pose_source: dict | None = None
+    rings: tuple[tuple[str, RingBrief], ...] | None = None
+
+    def to_dict(self) -> dict:
+        """As result.json's ``inputs`` writes it: the pose as nested lists (m), and
+        ``lidar_pose_source`` and ``rings`` (a list of ``{"frame", "method", "n_rings",
+        "purity"}``) only when set."""
+        out: dict = {"point_fields": dict(self.point_fields), "notes": list(self.notes),
+                     "camera_model": self.camera_model,
+                     "lidar_pose": None if self.lidar_pose is None
+                     else np.asarray(self.lidar_pose).tolist(),
+                     "mask": self.mask}
+        if self.lidar_pose_source is not None:
+            out["lidar_pose_source"] = self.lidar_pose_source
+        if self.rings is not None:
+            out["rings"] = [{"frame": name, **r.to_dict()} for name, r in self.rings]
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "InputsReport":
+        """The report read back from its :meth:`to_dict` form; a key it lacks reads as
+        empty (no fields, no notes, a pinhole camera, no pose, no mask).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (m).
+        """
+        pose = doc.get("lidar_pose")
+        rings = doc.get("rings")
+        return cls(point_fields=dict(doc.get("point_fields") or {}),
+                   notes=tuple(str(n) for n in doc.get("notes") or ()),
+                   camera_model=str(doc.get("camera_model", "pinhole")),
+                   lidar_pose=None if pose is None else np.array(pose, dtype=np.float64),
+                   mask=bool(doc.get("mask", False)),
+                   lidar_pose_source=doc.get("lidar_pose_source"),
+                   rings=None if rings is None else tuple(
+                       (str(r["frame"]), RingBrief.from_dict(r)) for r in rings))
+
+
 def describe_inputs(frames: list[Frame], lidar_info: dict | None = None,
-                    rings: list[Rings] | None = None) -> dict:
+                    rings: list[Rings] | None = None) -> InputsReport:
     """What the inputs offered (result.json ``inputs``): the point-cloud fields that gave
     intensity, ring and time, the reader's notes, the camera model, the LiDAR pose and, when
     given, where it came from (:func:`locate_lidar`) and each sweep's rings."""
     pf = dict(frames[0].point_fields or {})
     notes = sorted({w for f in frames for w in (f.point_fields or {}).get("warnings", ())})
     pf.pop("warnings", None)
-    cam = frames[0].camera
-    out = {"point_fields": pf, "notes": notes,
-           "camera_model": getattr(cam, "model", "pinhole"),
-           "lidar_pose": None if frames[0].sensor_pose is None
-           else np.asarray(frames[0].sensor_pose).tolist(),
-           "mask": frames[0].mask is not None}
-    if lidar_info is not None:
-        out["lidar_pose_source"] = lidar_info
-    if rings is not None:
-        out["rings"] = [{"frame": f.name, "method": r.method, "n_rings": int(r.n_rings),
-                         "purity": round(float(r.purity), 4)} for f, r in zip(frames, rings)]
-    return out
+    pose = frames[0].sensor_pose
+    return InputsReport(
+        point_fields=pf, notes=tuple(notes),
+        camera_model=getattr(frames[0].camera, "model", "pinhole"),
+        lidar_pose=None if pose is None else np.asarray(pose),
+        mask=frames[0].mask is not None, lidar_pose_source=lidar_info,
+        rings=None if rings is None else tuple(
+            (f.name, RingBrief(method=r.method, n_rings=int(r.n_rings),
+                               purity=round(float(r.purity), 4)))
+            for f, r in zip(frames, rings)))
 
 
 @dataclasses.dataclass

@@ -19,7 +19,8 @@ from .search import VARIABLES
 from .verdict import Evidence, Reliability, reliability
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .inputs import MotionReport
+    from .inputs import InputsReport, MotionReport
+    from .stage import FeatureCounts
     from .wide import WideStart
 
 
@@ -80,8 +81,9 @@ class CalibrationResult:
         Wall time per phase (s).
     frames : list of str
         The frames' names.
-    feature_counts : dict
-        The feature points per group and frame, and the frames that contribute.
+    feature_counts : FeatureCounts
+        The feature points per group and frame, and the frames that contribute
+        (:func:`paretocal.stage.feature_counts`).
     n_range : tuple of int
         ``(n_min, n_max)``, the searched range of points per frame.
     history : list
@@ -94,8 +96,9 @@ class CalibrationResult:
         The verdict: ``"ok"`` or ``"unreliable"``, the reasons, the evidence.
     motion : dict or None
         What was done about motion during the sweeps.
-    inputs : dict or None
-        What the input files offered: the point fields used, the camera model, notes.
+    inputs : InputsReport or None
+        What the input files offered: the point fields used, the camera model, notes
+        (:func:`paretocal.inputs.describe_inputs`).
     evidence : Evidence or None
         The verdict's own checks (restart, image-cloud agreement, per-axis intervals).
     wide : dict or None
@@ -120,7 +123,7 @@ class CalibrationResult:
     wall_s: float
     timings: dict
     frames: list[str]
-    feature_counts: dict
+    feature_counts: FeatureCounts
     n_range: tuple[int, int]
     history: list = field(default_factory=list)
     nsga_front: tuple | None = None
@@ -132,7 +135,7 @@ class CalibrationResult:
     #: What was done about motion during the sweeps (:func:`paretocal.inputs.compensate_motion`).
     motion: MotionReport | None = None
     #: What the input files offered: the point fields used, the camera model, notes.
-    inputs: dict | None = None
+    inputs: InputsReport | None = None
     #: The verdict's own checks (restart, image-cloud agreement, per-axis intervals; see
     #: :func:`paretocal.verdict.gather_evidence`); written inside ``reliability``.
     evidence: Evidence | None = None
@@ -204,13 +207,13 @@ class CalibrationResult:
             "frames": self.frames,
             "n_range": list(self.n_range),
             "front_size": int(len(self.front.X)),
-            "features": self.feature_counts,
+            "features": self.feature_counts.to_dict(),
             "cost_model": self.cost_model.to_dict(),
             "timings_s": {k: round(float(v), 3) for k, v in self.timings.items()},
             "ucb_k": round(float(self.settings.ucb_k), 4),
             "quality": None if self.quality is None else self.quality.to_dict(),
             "motion": None if self.motion is None else self.motion.to_dict(),
-            "inputs": self.inputs,
+            "inputs": None if self.inputs is None else self.inputs.to_dict(),
             "wide_start": None if self.wide is None else self.wide.to_dict(),
             "reliability": (self.reliability if self.reliability is not None
                             else reliability(self)).to_dict(),

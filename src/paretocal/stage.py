@@ -3,6 +3,7 @@ the scene, the range of ``n``, the measured cost model, and :class:`Stage` holdi
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -15,7 +16,7 @@ from .errors import DegenerateSceneError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
 from .lidar.rings import Rings
-from .inputs import joint_camera
+from .inputs import RingBrief, joint_camera
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
@@ -313,7 +314,169 @@ def holdout_score(scene, T_init: np.ndarray, objective: ObjectiveSettings,
     return obj.chamfer(Xa)["f1"]
 
 
-def feature_counts(feats: list[FrameFeatures]) -> dict:
+@dataclasses.dataclass(frozen=True)
+class RingRecovery:
+    """How the laser rings were recovered over the frames (:class:`FeatureCounts`).
+
+    Attributes
+    ----------
+    methods : tuple of str
+        The methods that recovered them, sorted, each once (:attr:`RingBrief.method`).
+    min_purity : float
+        The lowest purity over the frames (0 to 1): the share of the returns near the view
+        that lie on their ring's cone.
+    spacing_deg_median : float or None
+        The first frame's median elevation gap between neighbouring rings (deg); None when
+        it has fewer than two rings.
+    """
+
+    methods: tuple[str, ...]
+    min_purity: float
+    spacing_deg_median: float | None = None
+
+    def to_dict(self) -> dict:
+        """``{"methods", "min_purity", "spacing_deg_median"}``, as result.json writes it."""
+        return {"methods": list(self.methods), "min_purity": self.min_purity,
+                "spacing_deg_median": self.spacing_deg_median}
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "RingRecovery":
+        """The summary read back from its :meth:`to_dict` form; a purity it lacks reads as 1
+        (nothing to doubt), a spacing as None."""
+        return cls(methods=tuple(str(m) for m in doc.get("methods") or ()),
+                   min_purity=float(doc.get("min_purity", 1.0)),
+                   spacing_deg_median=doc.get("spacing_deg_median"))
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameCounts:
+    """One frame's LiDAR feature points in view, per group (:class:`FeatureCounts`).
+
+    Attributes
+    ----------
+    frame : str
+        The frame's name.
+    depth_edge, intensity_edge, smooth : int
+        Its feature points of each group (:data:`~paretocal.features.lidar.GROUP_NAMES`).
+    rings : RingBrief or None
+        Its sweep's rings; None when none were recovered.
+    """
+
+    frame: str
+    depth_edge: int
+    intensity_edge: int
+    smooth: int
+    rings: RingBrief | None = None
+
+    @property
+    def edges(self) -> int:
+        """Its edge points: depth and intensity edges."""
+        return self.depth_edge + self.intensity_edge
+
+    def to_dict(self) -> dict:
+        """``{"frame", "depth_edge", "intensity_edge", "smooth", "rings"}``."""
+        return {"frame": self.frame, "depth_edge": self.depth_edge,
+                "intensity_edge": self.intensity_edge, "smooth": self.smooth,
+                "rings": None if self.rings is None else self.rings.to_dict()}
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "FrameCounts":
+        """The row read back from its :meth:`to_dict` form; a count it lacks reads as 0, a
+        name as ``"?"``."""
+        rings = doc.get("rings")
+        return cls(frame=str(doc.get("frame", "?")), depth_edge=int(doc.get("depth_edge", 0)),
+                   intensity_edge=int(doc.get("intensity_edge", 0)),
+                   smooth=int(doc.get("smooth", 0)),
+                   rings=RingBrief.from_dict(rings) if rings else None)
+
+
+@dataclasses.dataclass(frozen=True)
+class NoiseNote:
+    """A frame whose depth edges are likely noise, and why (:func:`depth_edges_doubtful`).
+
+    Attributes
+    ----------
+    frame : str
+        The frame's name.
+    reason : str
+        Why, in words.
+    """
+
+    frame: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        """``{"frame", "reason"}``."""
+        return {"frame": self.frame, "reason": self.reason}
+
+
+@dataclasses.dataclass(frozen=True)
+class FeatureCounts:
+    """What the objective compares (:func:`feature_counts`; result.json ``features``, the
+    ``features`` of ``paretocal check``).
+
+    Attributes
+    ----------
+    per_frame_mean : dict of str to float
+        Per feature group (:data:`~paretocal.features.lidar.GROUP_NAMES`), the mean number of
+        feature points in view per frame (to 1 decimal).
+    total : dict of str to int
+        Per feature group, the feature points in view over all frames.
+    rings : tuple of int
+        The frames' ring counts, sorted, each once.
+    ring_recovery : RingRecovery or None
+        How the rings were recovered; None when no frame's were.
+    frames_contributing : int
+        The frames with enough feature points in view to constrain anything (at least
+        :data:`~paretocal.verdict.MIN_POINTS_PER_FRAME`).
+    per_frame : tuple of FrameCounts, shape (F,)
+        Each frame's counts and rings, in the frames' order.
+    noise : tuple of NoiseNote
+        The frames whose depth edges are likely noise, each with why.
+    """
+
+    per_frame_mean: dict[str, float]
+    total: dict[str, int]
+    rings: tuple[int, ...]
+    ring_recovery: RingRecovery | None
+    frames_contributing: int
+    per_frame: tuple[FrameCounts, ...]
+    noise: tuple[NoiseNote, ...] = ()
+
+    def to_dict(self) -> dict:
+        """As result.json's ``features`` writes it: the nested records as dicts, the tuples
+        as lists."""
+        return {"per_frame_mean": dict(self.per_frame_mean), "total": dict(self.total),
+                "rings": list(self.rings),
+                "ring_recovery": None if self.ring_recovery is None
+                else self.ring_recovery.to_dict(),
+                "frames_contributing": self.frames_contributing,
+                "per_frame": [p.to_dict() for p in self.per_frame],
+                "noise": [n.to_dict() for n in self.noise]}
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> "FeatureCounts":
+        """The counts read back from their :meth:`to_dict` form; a key it lacks reads as
+        empty (no frames, no rings, none contributing).
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form.
+        """
+        rec = doc.get("ring_recovery")
+        return cls(per_frame_mean={str(g): float(v)
+                                   for g, v in (doc.get("per_frame_mean") or {}).items()},
+                   total={str(g): int(v) for g, v in (doc.get("total") or {}).items()},
+                   rings=tuple(int(r) for r in doc.get("rings") or ()),
+                   ring_recovery=RingRecovery.from_dict(rec) if rec else None,
+                   frames_contributing=int(doc.get("frames_contributing", 0)),
+                   per_frame=tuple(FrameCounts.from_dict(p) for p in doc.get("per_frame") or ()),
+                   noise=tuple(NoiseNote(frame=str(n["frame"]), reason=str(n["reason"]))
+                               for n in doc.get("noise") or ()))
+
+
+def feature_counts(feats: list[FrameFeatures]) -> FeatureCounts:
     """What the objective compares, for result.json and ``check``: the feature points per group
     (mean per frame, total, and ``per_frame`` with each frame's rings), the frames that
     contribute, and ``noise``: the frames whose depth edges are likely noise, each with why
@@ -323,19 +486,21 @@ def feature_counts(feats: list[FrameFeatures]) -> dict:
     summaries = [f.rings for f in feats if f.rings]
     ring_info = None
     if summaries:
-        ring_info = {"methods": sorted({s["method"] for s in summaries}),
-                     "min_purity": min(s["purity"] for s in summaries),
-                     "spacing_deg_median": summaries[0]["spacing_deg_median"]}
-    return {"per_frame_mean": {g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
-            "total": total, "rings": sorted({f.n_rings for f in feats}),
-            "ring_recovery": ring_info,
-            # Frames with enough feature points in view to constrain anything.
-            "frames_contributing": int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME
-                                           for f in feats)),
-            "per_frame": [{"frame": f.name, **c, "rings": _ring_brief(f.rings)}
-                          for f, c in zip(feats, per)],
-            "noise": [{"frame": f.name, "reason": why} for f in feats
-                      if (why := depth_edges_doubtful(f.rings))]}
+        ring_info = RingRecovery(methods=tuple(sorted({s["method"] for s in summaries})),
+                                 min_purity=min(s["purity"] for s in summaries),
+                                 spacing_deg_median=summaries[0]["spacing_deg_median"])
+    return FeatureCounts(
+        per_frame_mean={g: round(total[g] / len(feats), 1) for g in GROUP_NAMES},
+        total=total, rings=tuple(sorted({f.n_rings for f in feats})),
+        ring_recovery=ring_info,
+        # Frames with enough feature points in view to constrain anything.
+        frames_contributing=int(sum(len(f.xyz) >= MIN_POINTS_PER_FRAME for f in feats)),
+        per_frame=tuple(FrameCounts(frame=f.name, depth_edge=c["depth_edge"],
+                                    intensity_edge=c["intensity_edge"], smooth=c["smooth"],
+                                    rings=RingBrief.from_dict(f.rings) if f.rings else None)
+                        for f, c in zip(feats, per)),
+        noise=tuple(NoiseNote(frame=f.name, reason=why) for f in feats
+                    if (why := depth_edges_doubtful(f.rings))))
 
 
 def log_features(feats: list[FrameFeatures]) -> None:
@@ -351,10 +516,6 @@ def log_features(feats: list[FrameFeatures]) -> None:
         log.warning("the depth edges of %d of %d frames are likely noise (frame %s: %s); the "
                     "calibration leans on them: give the clouds' ring field or lidar_pose in "
                     "calib.yaml", len(doubtful), len(feats), doubtful[0][0], doubtful[0][1])
-
-
-def _ring_brief(rings: dict | None) -> dict | None:
-    return None if not rings else {k: rings[k] for k in ("method", "n_rings", "purity")}
 
 
 def depth_edges_doubtful(rings: dict | None) -> str | None:

@@ -45,6 +45,7 @@ from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_prefere
 
 if TYPE_CHECKING:  # pragma: no cover
     from .result import CalibrationResult
+    from .stage import FeatureCounts
 
 #: A frame with fewer LiDAR feature points in view adds nothing the verdict can count on.
 MIN_POINTS_PER_FRAME = 30
@@ -1241,7 +1242,8 @@ def reliability(result: "CalibrationResult") -> Reliability:
     reasons = []
     n_frames = len(result.frames)
     # Frames passed are not frames that count: one with no feature points in view adds none.
-    useful = (result.feature_counts or {}).get("frames_contributing", n_frames)
+    counts: FeatureCounts | None = result.feature_counts
+    useful = n_frames if counts is None else counts.frames_contributing
     if n_frames < RELIABLE_MIN_FRAMES:
         reasons.append(f"only {n_frames} frame(s): too few to average out one scene's biases "
                        f"(use at least {RELIABLE_MIN_FRAMES})")
@@ -1317,10 +1319,10 @@ def reliability(result: "CalibrationResult") -> Reliability:
         reasons.append(f"the LiDAR moved {mo.skew_m:.2g} m during a sweep and the motion "
                        f"could not be compensated ({mo.reason}): moving structure is "
                        "misplaced by up to half that")
-    rings = (result.feature_counts or {}).get("ring_recovery") or {}
-    if rings and rings.get("min_purity", 1.0) < MIN_PURITY:
+    rings = None if counts is None else counts.ring_recovery
+    if rings is not None and rings.min_purity < MIN_PURITY:
         reasons.append(f"the LiDAR's laser rings could not be recovered reliably (purity "
-                       f"{rings['min_purity']:.2f}): depth edges are noise; give the ring "
+                       f"{rings.min_purity:.2f}): depth edges are noise; give the ring "
                        "field or the LiDAR's pose (lidar_pose) in calib.yaml")
     ev: Evidence = getattr(result, "evidence", None) or Evidence()
     # The frames' agreement as the intervals measure it, at the result's local optimum: at the
@@ -1383,7 +1385,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
         wide = _imprecise(iv)
         if wide:
             reasons.append(wide)
-    few = _few_edges(result.feature_counts)
+    few = _few_edges(counts)
     if reasons and few:
         reasons.append(few)
     # Intervals hold only where nothing else casts doubt on the result (Reliability.intervals):
@@ -1415,14 +1417,13 @@ def _narrower_advice(x: np.ndarray, rival: np.ndarray, err: np.ndarray) -> str:
             "the search box and the other pose outside)")
 
 
-def _few_edges(feature_counts: dict | None) -> str | None:
+def _few_edges(feature_counts: FeatureCounts | None) -> str | None:
     """The frames whose scenes give the objective (almost) no edge to align: fewer than
     :data:`MIN_POINTS_PER_FRAME` LiDAR edge points (depth and intensity edges) in view. A
     reason to add to an unreliable verdict (alone, such frames only add nothing); None when
     every frame has edges."""
-    per = (feature_counts or {}).get("per_frame") or []
-    few = [p.get("frame", "?") for p in per
-           if p.get("depth_edge", 0) + p.get("intensity_edge", 0) < MIN_POINTS_PER_FRAME]
+    per = () if feature_counts is None else feature_counts.per_frame
+    few = [p.frame for p in per if p.edges < MIN_POINTS_PER_FRAME]
     if not few:
         return None
     more = f" and {len(few) - 3} more" if len(few) > 3 else ""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
@@ -11,6 +11,9 @@ from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
 from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..stage import FeatureCounts
 
 
 @app.command()
@@ -65,22 +68,22 @@ def check(
         typer.echo(f"paretocal: WEAK CHECK: {note}")
 
 
-def features_line(features: dict) -> str:
+def features_line(features: FeatureCounts) -> str:
     """What the objective compared, in one line: the feature points per frame by group, the
     rings, and the frames whose depth edges look like noise (``stage.feature_counts``)."""
-    mean = features["per_frame_mean"]
-    rings = features["rings"]
+    mean = features.per_frame_mean
+    rings = features.rings
     ring_text = ("no rings" if not rings else
                  f"{'/'.join(str(r) for r in rings)} rings")
-    rec = features.get("ring_recovery")
-    if rec:
-        ring_text += f" ({', '.join(rec['methods'])}, purity >= {rec['min_purity']:.2f})"
+    rec = features.ring_recovery
+    if rec is not None:
+        ring_text += f" ({', '.join(rec.methods)}, purity >= {rec.min_purity:.2f})"
     line = (f"features per frame: {mean['depth_edge']:g} depth edges, "
             f"{mean['intensity_edge']:g} intensity edges, {mean['smooth']:g} smooth points "
-            f"in view; {ring_text}; {features['frames_contributing']} of "
-            f"{len(features['per_frame'])} frames contribute")
-    noise = features["noise"]
+            f"in view; {ring_text}; {features.frames_contributing} of "
+            f"{len(features.per_frame)} frames contribute")
+    noise = features.noise
     if noise:
         line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
-                 f"{noise[0]['frame']}: {noise[0]['reason']})")
+                 f"{noise[0].frame}: {noise[0].reason})")
     return line
