@@ -21,8 +21,8 @@ import numpy as np
 from .config import Settings
 from .geometry import pose_error
 from .io.frame import Frame
-from .quality import (Quality, displacement_px, local_optimum, neighbour_fraction,
-                      pixel_fd_step, quality_report)
+from .quality import (Quality, correction_between, displacement_px, local_optimum,
+                      neighbour_fraction, pixel_fd_step, quality_report)
 from .stage import FeatureCounts
 
 NEIGHBOUR_STEP = np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])   # m and deg
@@ -352,6 +352,13 @@ class Comparison:
     frame_scores: np.ndarray | None = None
     sweeps: tuple = field(default=(), repr=False, compare=False)
 
+    def axes_text(self) -> str:
+        """B relative to A (the correction ``D``, ``B = A @ D``) per axis, in words (cm, deg)."""
+        d = self.to_dict()["correction"]
+        return (f"x {d['x_cm']:+.2f} cm, y {d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw "
+                f"{d['yaw_deg']:+.3f} deg, pitch {d['pitch_deg']:+.3f} deg, roll "
+                f"{d['roll_deg']:+.3f} deg")
+
     def to_dict(self) -> dict:
         """The JSON form (``compare --out``): centimetres and degrees."""
         c = self.correction
@@ -396,7 +403,6 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
     -------
     Comparison
     """
-    from .geometry import correction_params, invert
     from .inputs import prepare_lidar
     from .search.basin import CLEAR_P, paired_preference
     from .stage import Stage
@@ -404,7 +410,7 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
     T_a = np.asarray(T_a, dtype=np.float64)
     T_b = np.asarray(T_b, dtype=np.float64)
     e = pose_error(T_b, T_a)
-    base = dict(T_a=T_a, T_b=T_b, correction=correction_params(invert(T_a) @ T_b),
+    base = dict(T_a=T_a, T_b=T_b, correction=correction_between(T_a, T_b),
                 rotation_deg=float(e["rotation_deg"]),
                 translation_m=float(e["translation_cm"]) / 100.0,
                 camera_m=(T_b[:3, 3] - T_a[:3, 3]))
@@ -422,10 +428,11 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
                       rings=lidar.rings, sampling=False)
         obj = stage.objective
         x = np.zeros((2, 7))
-        x[:, :6] = correction_params(invert(T_view)[None] @ np.stack([T_a, T_b]))
+        x[:, :6] = correction_between(T_view, np.stack([T_a, T_b]))
         x[:, 6] = stage.n_max
-        ab, ba = paired_preference(obj, x[0], x[1]), paired_preference(obj, x[1], x[0])
-        prefs.append(Preference(name, ab["mean_px"], ab["se_px"], ab["p"], ba["p"],
+        # One-sided in B's favour; A's is its complement (the same t, reversed).
+        ab = paired_preference(obj, x[0], x[1])
+        prefs.append(Preference(name, ab["mean_px"], ab["se_px"], ab["p"], 1.0 - ab["p"],
                                 ab["frames"], ab["frames_far_better"]))
         pixels.append(displacement_px(obj, x[0], x[1]))
         if name == "A":

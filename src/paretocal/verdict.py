@@ -41,7 +41,8 @@ from .lidar.rings import MIN_PURITY
 from .geometry import pose_error
 from .quality import (AXES, TO_REPORT, UNITS, at_every_point, axis_resolution, cm_written,
                       displacement_px, local_optimum, pixel_fd_step, quality_report)
-from .search.basin import SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, paired_preference
+from .search.basin import (SAME_BASIN_SHARE, USABLE_DEG, USABLE_M, departure,
+                           paired_preference)
 
 if TYPE_CHECKING:  # pragma: no cover
     from .result import CalibrationResult
@@ -1354,7 +1355,8 @@ def reliability(result: "CalibrationResult") -> Reliability:
                        f"({r.frames_restart_better} of {r.frames} frames prefer it): the frames "
                        "do not single out one pose; add frames with more varied structure "
                        "(buildings, poles, cars at several distances)"
-                       + _narrower_advice(x, r.correction, err))
+                       + _narrower_advice(x, r.correction, s.init_error_deg,
+                                          s.init_error_m))
     checks = () if ev.cameras is None else ev.cameras.cameras
     for name in () if ev.cameras is None else ev.cameras.disagreeing:
         c = next(c for c in checks if c.name == name)
@@ -1400,21 +1402,24 @@ def reliability(result: "CalibrationResult") -> Reliability:
         max_jackknife_se_m=np.nan if se_cm is None else round(float(se_cm), 3) / 100.0)
 
 
-def _narrower_advice(x: np.ndarray, rival: np.ndarray, err: np.ndarray) -> str:
+def _narrower_advice(x: np.ndarray, rival: np.ndarray, init_error_deg: float,
+                     init_error_m: float) -> str:
     """Advice to state a smaller initial error, when the evidence says it would help: the
     rival pose ``rival`` (6,) lies farther from the start than the result ``x`` (6,), in units
-    of the stated error ``err`` (6,: m and deg), so a box that keeps the result can leave the
-    rival out. Empty otherwise (a start inside the stated error is not told to change it)."""
+    of the stated error (:func:`~paretocal.search.basin.departure`), so a box that keeps the
+    result can leave the rival out. Empty otherwise (a start inside the stated error is not
+    told to change it)."""
     rival = np.asarray(rival, dtype=np.float64)[:6]
     if not np.all(np.isfinite(rival)):
         return ""
-    d_x, d_r = float(np.max(np.abs(x) / err)), float(np.max(np.abs(rival) / err))
+    d_x = departure(x, init_error_deg, init_error_m)
+    d_r = departure(rival, init_error_deg, init_error_m)
     scale = math.sqrt(max(d_x, 1e-3) * d_r)          # between the two, geometrically
     if d_r <= d_x or scale >= 1.0:
         return ""
     return (f", or, if the start is known to be that close, state a smaller initial error "
-            f"(--init-error {scale * err[3]:.2g},{scale * err[0]:.2g} keeps the result inside "
-            "the search box and the other pose outside)")
+            f"(--init-error {scale * init_error_deg:.2g},{scale * init_error_m:.2g} keeps the "
+            "result inside the search box and the other pose outside)")
 
 
 def _few_edges(feature_counts: FeatureCounts | None) -> str | None:

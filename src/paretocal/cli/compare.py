@@ -64,10 +64,7 @@ def compare(
         from ..report.interactive import write_comparison
 
         write_comparison(c, list(c.sweeps), settings, page)
-    d = c.to_dict()["correction"]
-    typer.echo(f"paretocal: B = A @ D, in A's LiDAR frame: x {d['x_cm']:+.2f} cm, y "
-               f"{d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw {d['yaw_deg']:+.3f} deg, "
-               f"pitch {d['pitch_deg']:+.3f} deg, roll {d['roll_deg']:+.3f} deg")
+    typer.echo(f"paretocal: B = A @ D, in A's LiDAR frame: {c.axes_text()}")
     typer.echo(f"paretocal: {c.rotation_deg:.3f} deg / {100 * c.translation_m:.2f} cm apart"
                + ("" if c.pixels is None else f", {c.pixels:.1f} px in the images"))
     if c.prefer is not None:

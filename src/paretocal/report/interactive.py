@@ -786,10 +786,7 @@ def comparison_data(comparison, frames: list[Frame], settings, max_points: int =
     scores = None if sc is None else {
         "solutions": [[_finite(v) for v in row] for row in sc], "initial": None,
         "reference": None, "n": None}
-    d = comparison.to_dict()["correction"]
-    move = (f"x {d['x_cm']:+.2f} cm, y {d['y_cm']:+.2f} cm, z {d['z_cm']:+.2f} cm, yaw "
-            f"{d['yaw_deg']:+.3f} deg, pitch {d['pitch_deg']:+.3f} deg, roll "
-            f"{d['roll_deg']:+.3f} deg")
+    move = comparison.axes_text()
     solutions = [{"T": T_a.tolist(), "n": None, "caption": "A"},
                  {"T": T_b.tolist(), "n": None, "caption": f"B = A @ D ({move})"}]
     data = {
@@ -830,7 +827,7 @@ def write_comparison(comparison, frames: list[Frame], settings, path: str | Path
     c = comparison.to_dict()
     rows = [("frames", f"{len(frames)} ({html.escape(frames[0].name)}"
                        + (f" \u2026 {html.escape(frames[-1].name)})" if len(frames) > 1 else ")")),
-            ("B from A", html.escape(data["solutions"][1]["caption"][len("B = A @ D ("):-1])),
+            ("B from A", html.escape(comparison.axes_text())),
             ("apart", f"{c['rotation_deg']:.3f} deg, {c['translation_cm']:.2f} cm"
                       + ("" if c["pixels"] is None else f", {c['pixels']:.1f} px")),
             ("the frames prefer", html.escape(str(comparison.prefer)))]

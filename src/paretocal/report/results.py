@@ -58,16 +58,6 @@ def partial_front_csv(X: np.ndarray, F: np.ndarray) -> str:
     return buf.getvalue()
 
 
-def json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, tuple):
-        return list(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
 def strict_json(doc):
     """``doc`` with every number that is not finite (NaN, infinity) as None, numpy values as
     Python's: what ``json.dumps(..., allow_nan=False)`` writes as standard JSON (a one-frame

@@ -20,7 +20,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
-import json
 import platform
 import time
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ from ...errors import InputError, ParetocalError
 from ...geometry import pose_error
 from ...io.atomic import atomic_write_text
 from ...io.layouts import load_frames
-from ...report.results import json_default, write_run
+from ...report.results import dumps, write_run
 from ...search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends
@@ -304,7 +303,7 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
         "innovization": {"findings": text, "trends": fits},
         "robustness": rsum,
     }
-    atomic_write_text(out / "study.json", json.dumps(doc, indent=1, default=json_default) + "\n")
+    atomic_write_text(out / "study.json", dumps(doc, indent=1))
     study_report(doc, out, out / "report.html")
     return doc
 
