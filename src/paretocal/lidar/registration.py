@@ -409,11 +409,8 @@ def register_pair(source: np.ndarray, target: np.ndarray, T0: np.ndarray | None 
     rng = np.random.default_rng(seed)
     src = np.asarray(source, dtype=np.float64)
     tgt = np.asarray(target, dtype=np.float64)
-    for name, a in (("source", src), ("target", tgt)):
-        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 10:
-            raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {a.shape}")
-    source_cloud = prepare_cloud(src, points, rng)
-    target_cloud = prepare_cloud(tgt, points, rng)
+    source_cloud = prepare_cloud(src, points, rng, name="source")
+    target_cloud = prepare_cloud(tgt, points, rng, name="target")
     return register_prepared(source_cloud, target_cloud, T0, max_translation=max_translation,
                              up=up, k_normal=k_normal, block=block, refine=refine)
 
@@ -448,12 +445,13 @@ class PreparedCloud:
 
 
 def prepare_cloud(xyz: np.ndarray, points: int, rng: np.random.Generator,
-                  start: float | None = None) -> PreparedCloud:
+                  start: float | None = None, name: str = "a cloud") -> PreparedCloud:
     """``xyz`` (N, 3) with its subsamples of about ``points`` points (:func:`prepare_levels`;
-    ``start``: a similar sweep's voxel edge, m, to begin the search for this one's)."""
+    ``start``: a similar sweep's voxel edge, m, to begin the search for this one's; ``name``:
+    the cloud in the error a wrong shape raises)."""
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3 or len(xyz) < 10:
-        raise ValueError(f"a cloud must have shape (N, 3) with N >= 10, got {xyz.shape}")
+        raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {xyz.shape}")
     size, levels = prepare_levels(xyz, points, rng, start)
     return PreparedCloud(xyz, size, levels)
 
