@@ -790,7 +790,9 @@ def summarise(rows: list[dict], args, ds: Dataset | None = None) -> str:
 def datasets(args, work: Path) -> list[Dataset]:
     """The datasets of the command line (variant folders are built under ``work``)."""
     if args.source is not None:
-        source = Path(args.source)
+        # "DATA/" stands for the data folder, as in the commands the docs show.
+        source = Path(args.source.replace("DATA/", f"{DATA}/", 1)
+                      if args.source.startswith("DATA/") else args.source)
     else:
         source = DATE if args.dataset == "raw" else OBJECT
     if not source.exists():
