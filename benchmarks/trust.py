@@ -21,6 +21,8 @@ beams16        the drive decimated to 16 beams, +-5 deg / 0.2 m
 contour16      16 beams with ``features.edge_contour`` on (all frames agree on a wrong pose)
 object         the KITTI object frame (one frame, hedges and trees), +-10 deg / 0.25 m
 aimotive       aiMotive front camera, 5 night frames (0, 4, ..., 16), +-5 deg / 0.2 m
+standing       PandaSet front-left camera, the 13 frames taken standing (0:13), +-5 deg / 0.2 m:
+               every frame shows one view, whose bias they share
 =============  =================================================================================
 
 A result is *wrong* when it is more than 1 deg or 10 cm from the reference. Reported: wrong
@@ -58,6 +60,7 @@ from paretocal.geometry import pose_error  # noqa: E402
 from paretocal.quality import AXES, TO_REPORT, correction_between  # noqa: E402
 
 AIMOTIVE = DATA / "aimotive" / "front_pinhole"
+PANDASET_FRONT_LEFT = DATA / "pandaset" / "front_left"
 
 
 @dataclasses.dataclass
@@ -154,6 +157,7 @@ def cases() -> list[Case]:
         Case("contour16", 4, 5, 0.2, _variant("16beam"), {"features": {"edge_contour": True}}),
         Case("object", 3, 10, 0.25, _source(OBJECT)),
         Case("aimotive", 3, 5, 0.2, _source(AIMOTIVE, "0:20:4")),
+        Case("standing", 2, 5, 0.2, _source(PANDASET_FRONT_LEFT, "0:13")),
     ]
 
 

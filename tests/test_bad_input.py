@@ -884,6 +884,18 @@ def _fake_result(**over):
     ({"evidence": {"intervals": {"units": {"x": "cm"}, "half_width": {"x": 9.9},
                                  "undetermined": [], "alignment_px": 1.7,
                                  "sampling_px": None}}}, None),
+    ({"evidence": {"motion": {"applied": True, "directions": 9, "residual_deg": 0.6,
+                              "change_deg": 2.5, "tolerance_deg": 1.5}}},
+     "the motion disagrees: the directions of travel both sensors see put the camera's "
+     "rotation 2.5 deg from the result's (they agree to 1.5 deg over 9 pairs)"),
+    ({"evidence": {"motion": {"applied": True, "directions": 9, "residual_deg": 0.6,
+                              "change_deg": 0.5, "tolerance_deg": 1.5}}}, None),
+    ({"evidence": {"motion": {"applied": False, "standing": True, "travel_m": 0.02,
+                              "need_m": 2.0, "reason": "the rig barely moves"}}},
+     "the rig stands still over the 4 frames (the LiDAR travels 0.02 m; the view changes "
+     "with about 2 m)"),
+    ({"evidence": {"motion": {"applied": False, "reason": "the motion gives 1 direction(s)"}}},
+     None),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.verdict import reliability

@@ -134,6 +134,7 @@ class DecisionSettings:
     polish_iters: int = 12           #: Newton iterations of the polish
     restarts: int = 1                #: independent restarts checking the result (0: none)
     restart_share: float = 0.25      #: each restart's share of the search's evaluations
+    motion_check: bool = True        #: check the rotation against the recording's motion
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ stages' public names stay importable from here."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from contextlib import contextmanager
@@ -14,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import Settings, check_population_memory, dataset_settings
+from .crosscheck import CHECK_ODOMETRY_POINTS, MIN_FRAMES, motion_agreement, recording_motion
 from .decide import decide, reprojection_deviation
 from .errors import STOP, InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
@@ -178,9 +180,32 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
         wide=wide)
     result.reliability = reliability(result)
+    if _motion_checked(frames, settings, wide, result.reliability.ok):
+        # The recording's motion, when nothing else casts doubt on the result: seconds of
+        # odometry that only a result otherwise judged ok needs (the wide start's is reused).
+        with _timed(timings, "verdict", progress):
+            motion = (wide.recording if wide is not None and wide.recording is not None
+                      else recording_motion(frames, settings.search.seed,
+                                            points=CHECK_ODOMETRY_POINTS,
+                                            features_beside=True))
+            result.evidence = dataclasses.replace(
+                evidence, motion=motion_agreement(motion, T[i]))
+            result.reliability = reliability(result)
+        timings["total"] = result.wall_s = time.perf_counter() - t_start
     if not result.reliability.ok:
         log.warning("the result may be unreliable: %s", "; ".join(result.reliability.reasons))
     return result
+
+
+def _motion_checked(frames: list[Frame], settings: Settings, wide, ok: bool) -> bool:
+    """Whether the verdict checks the result against the recording's motion
+    (:mod:`paretocal.crosscheck`): ``decision.motion_check`` on, at least
+    :data:`~paretocal.crosscheck.MIN_FRAMES` frames of one camera, and either the wide start
+    measured the motion already or nothing else casts doubt on the result (``ok``)."""
+    if (not settings.decision.motion_check or len(frames) < MIN_FRAMES
+            or any(f.camera.mount is not None for f in frames)):
+        return False
+    return ok or (wide is not None and wide.recording is not None)
 
 
 #: What the run is doing during each timed phase, for the line an interrupt prints.

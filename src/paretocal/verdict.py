@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .config import DecisionSettings, SearchSettings
+from .crosscheck import MotionAgreement
 from .camera import project
 from .features.lidar import GROUP_NAMES, SMOOTH
 from .lidar.rings import MIN_PURITY
@@ -571,6 +572,10 @@ class Evidence:
         The independent restart(s) (:func:`restart_evidence`); None when switched off.
     cameras : CameraAgreement or None
         The cameras' agreement (:func:`camera_evidence`), a joint calibration only.
+    motion : MotionAgreement or None
+        The result's rotation against the recording's motion
+        (:func:`paretocal.crosscheck.motion_agreement`); None when not checked (fewer than
+        three frames, a joint calibration, or ``decision.motion_check`` off).
     """
 
     contrast: Contrast | None = None
@@ -578,6 +583,7 @@ class Evidence:
     intervals: Intervals | None = None
     restart: RestartCheck | None = None
     cameras: CameraAgreement | None = None
+    motion: MotionAgreement | None = None
 
     def to_dict(self, intervals: bool = True) -> dict[str, Any]:
         """As ``result.json`` writes it, the parts gathered by name.
@@ -593,7 +599,7 @@ class Evidence:
         """
         parts = {"contrast": self.contrast, "start": self.start,
                  "intervals": self.intervals if intervals else None,
-                 "restart": self.restart, "cameras": self.cameras}
+                 "restart": self.restart, "cameras": self.cameras, "motion": self.motion}
         return {k: v.to_dict() for k, v in parts.items() if v is not None}
 
     @classmethod
@@ -613,7 +619,8 @@ class Evidence:
         return cls(contrast=part("contrast", Contrast), start=part("start", StartComparison),
                    intervals=part("intervals", Intervals),
                    restart=part("restart", RestartCheck),
-                   cameras=part("cameras", CameraAgreement))
+                   cameras=part("cameras", CameraAgreement),
+                   motion=part("motion", MotionAgreement))
 
 
 @dataclass(frozen=True)
@@ -1260,14 +1267,6 @@ def reliability(result: "CalibrationResult") -> Reliability:
     wide = getattr(result, "wide", None)
     if wide is not None and wide.ambiguity:
         reasons.append(wide.ambiguity)
-    photo = None if wide is None else wide.photo
-    if photo is not None and not photo.agree:
-        reasons.append(
-            f"photo-consistency disagrees: the images agree clearly better at a pose "
-            f"{photo.separation_deg:.1f} deg / {100 * (photo.separation_m or 0.0):.0f} cm from "
-            f"the result (cost {photo.rival:.3f} against {photo.result:.3f}), a basin the edges "
-            "missed or were fooled out of; give a better start, or frames with structure at "
-            "several distances")
     s = result.settings.search
     bound = np.r_[[s.bound_t] * 3, [s.bound_r] * 3]
     x = np.asarray(result.front.X[result.chosen, :6], dtype=np.float64)
@@ -1367,6 +1366,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
             f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
             "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
             "(without --joint) and compare")
+    reasons += _cross_reasons(ev.motion, None if wide is None else wide.photo, n_frames)
     ct = ev.contrast
     # A z that is not a number (random poses that all score alike: no spread to compare
     # with) is no evidence of agreement either.
@@ -1400,6 +1400,34 @@ def reliability(result: "CalibrationResult") -> Reliability:
         at_bound=tuple(at_bound),
         max_jackknife_se_deg=np.nan if se_deg is None else round(float(se_deg), 4),
         max_jackknife_se_m=np.nan if se_cm is None else round(float(se_cm), 3) / 100.0)
+
+
+def _cross_reasons(mc: MotionAgreement | None, photo, n_frames: int) -> list[str]:
+    """The verdict's reasons from evidence that shares nothing with the edges: the
+    recording's motion (a rig standing still, a rotation the motion contradicts) and
+    photo-consistency (a :class:`~paretocal.wide.PhotoCheck` after a wide start)."""
+    reasons = []
+    if photo is not None and not photo.agree:
+        reasons.append(
+            f"photo-consistency disagrees: the images agree clearly better at a pose "
+            f"{photo.separation_deg:.1f} deg / {100 * (photo.separation_m or 0.0):.0f} cm from "
+            f"the result (cost {photo.rival:.3f} against {photo.result:.3f}), a basin the edges "
+            "missed or were fooled out of; give a better start, or frames with structure at "
+            "several distances")
+    if mc is not None and mc.standing and n_frames >= RELIABLE_MIN_FRAMES:
+        reasons.append(
+            f"the rig stands still over the {n_frames} frames (the LiDAR travels "
+            f"{mc.travel_m:.2g} m; the view changes with about {mc.need_m:.2g} m): they show "
+            "the scene from one place, whose biases do not average out however many frames "
+            "there are; add frames taken at other places (while driving)")
+    if mc is not None and not mc.agree:
+        reasons.append(
+            f"the motion disagrees: the directions of travel both sensors see put the camera's "
+            f"rotation {mc.change_deg:.2g} deg from the result's (they agree to "
+            f"{mc.tolerance_deg:.2g} deg over {mc.directions + mc.turns} pairs): the frames' "
+            "edges all favour a wrong pose; give a better start, or frames with structure at "
+            "several distances")
+    return reasons
 
 
 def _narrower_advice(x: np.ndarray, rival: np.ndarray, init_error_deg: float,

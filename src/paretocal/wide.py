@@ -41,7 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import Settings
-from .egomotion import camera_odometry, image_features, lidar_odometry, rotation_from_motion
+from .crosscheck import (MIN_FRAMES, MIN_PARALLAX_SHARE, RecordingMotion, baseline_m,  # noqa: F401
+                         camera_pairs, motion_tolerance_deg, recording_motion)
+from .egomotion import rotation_from_motion
 from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
 from .objective.photo import UNSEEN_COST, PhotoScene, build_photo_scene, photo_cost
@@ -59,25 +61,8 @@ WIDE_M = 0.3
 #: lands within a few tenths of a degree and a few cm when it finds the truth's basin.
 AFTER_DEG = 3.0
 AFTER_M = 0.15
-#: Points per sweep of the LiDAR odometry: directions of travel need no more (the
-#: calibration's own ICP default is for de-skewing).
-ODOMETRY_POINTS = 8000
-#: Fewest frames: odometry needs pairs, and the direction of travel a baseline.
-MIN_FRAMES = 3
-#: The camera pairs compared: each frame with the first one far enough for this share of
-#: the image width in parallax at the scene's median range (about 4 m, 10 frames, on the
-#: KITTI drive: the direction of travel from pairs 4 frames apart agreed 1.3 deg RMS, from
-#: 10 apart 0.6 deg) ...
-PARALLAX_SHARE = 0.25
-#: ... and the least travel over the whole recording that gives a direction at all.
-MIN_PARALLAX_SHARE = 0.05
 #: Depth slices of the stratified search, as a share of the stated translation error.
 STRATUM_SHARE = 1.0 / 3.0
-#: The motion's two angles are searched within this many times the pairs' RMS disagreement
-#: with the fit (at least :data:`MIN_BAND_DEG`): the disagreement of one pair bounds what
-#: the fit of several can be off by (KITTI: 0.6 deg with pairs 10 frames apart, 1.3 deg with 4).
-BAND_RESIDUALS = 2.0
-MIN_BAND_DEG = 1.5
 #: Differential evolution in each slice: population per dimension and generations.
 DE_POPSIZE = 10
 DE_GENERATIONS = 40
@@ -187,6 +172,8 @@ class WideStart:
         Every round's polished poses (4, 4) (kept for :func:`photo_check`; not written).
     seed : int
         The search's seed (:func:`photo_check`'s bootstrap).
+    recording : RecordingMotion or None
+        The motion of both sensors (the verdict's motion check reads it; not written).
     """
 
     T: np.ndarray | None
@@ -205,6 +192,7 @@ class WideStart:
     scene: PhotoScene | None = field(default=None, repr=False)
     seed: int = 0
     tried: list = field(default_factory=list, repr=False)
+    recording: RecordingMotion | None = field(default=None, repr=False)
 
     @property
     def applied(self) -> bool:
@@ -253,42 +241,6 @@ def after_settings(settings: Settings) -> Settings:
                                     "bound_t_m": None, "bound_r_deg": None})
 
 
-def baseline_m(width: int, focal_px: float, median_range_m: float, share: float) -> float:
-    """The baseline (m) that shows ``share`` of the image width in parallax at the scene's
-    median range."""
-    return share * width * median_range_m / focal_px
-
-
-def camera_pairs(lidar_steps_m: np.ndarray, baseline: float,
-                 min_baseline: float) -> list[tuple[int, int]]:
-    """Image pairs a baseline apart.
-
-    Parameters
-    ----------
-    lidar_steps_m : ndarray, shape (K-1,)
-        The LiDAR's travel between consecutive frames (m; 0 for a standing pair, NaN unknown).
-    baseline, min_baseline : float
-        The travel (m) a pair should span, and the least it may.
-
-    Returns
-    -------
-    list of (int, int)
-        Each frame with the first later one ``baseline`` of travel away; when the whole
-        recording travels less, each frame at least ``min_baseline`` from the last one with
-        the last one.
-    """
-    cum = np.r_[0.0, np.cumsum(np.nan_to_num(np.asarray(lidar_steps_m, dtype=np.float64)))]
-    K = len(cum)
-    pairs = []
-    for i in range(K - 1):
-        j = int(np.searchsorted(cum, cum[i] + baseline, side="left"))
-        if j < K:
-            pairs.append((i, j))
-    if not pairs:
-        pairs = [(i, K - 1) for i in range(K - 1) if cum[-1] - cum[i] >= min_baseline]
-    return pairs
-
-
 def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                rings=None, progress=None) -> WideStart:
     """A start within a few tenths of a degree of the truth from one tens of degrees off.
@@ -319,34 +271,22 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
                            f"frames; there are {len(frames)}")
         return out
     s = settings.search
-    t0 = time.perf_counter()
-    clouds = [f.points[:, :3] for f in frames]
-    cam = frames[0].camera
-    # The images' features do not depend on the LiDAR's odometry: extracted beside it (OpenCV
-    # and the registration's numpy and scipy work release the interpreter).
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        pending = pool.submit(image_features, [f.image for f in frames], cam)
-        lo = lidar_odometry(clouds, points=ODOMETRY_POINTS, seed=s.seed)
-        image_feats = pending.result()
-    rng_m = float(np.median(np.linalg.norm(clouds[0], axis=1)))
-    focal = float(cam.K[0, 0])
-    need = baseline_m(cam.width, focal, rng_m, MIN_PARALLAX_SHARE)
-    steps = np.where(lo.standing, 0.0, lo.translation_m)
-    path = float(np.nansum(steps))
-    if path < need:
+    motion = recording_motion(frames, s.seed)
+    out.recording = motion
+    out.seconds["odometry"] = motion.seconds
+    lo, pairs, pairs_out = motion.lidar, motion.pairs, motion.camera
+    path = motion.travel_m
+    if not motion.moves:
         out.reasons.append(f"the rig barely moves: the LiDAR travels {path:.2f} m over the "
-                           f"frames, and a direction of travel needs about {need:.1f} m "
+                           f"frames, and a direction of travel needs about {motion.need_m:.1f} m "
                            f"({100 * MIN_PARALLAX_SHARE:.0f} % of the image's width in "
-                           f"parallax at the scene's median range, {rng_m:.0f} m); a static "
-                           f"rig gives no direction of travel: give a start within "
+                           f"parallax at the scene's median range, {motion.range_m:.0f} m); a "
+                           f"static rig gives no direction of travel: give a start within "
                            f"{WIDE_DEG:g} deg / {WIDE_M:g} m, or frames taken while moving")
-        out.seconds["odometry"] = time.perf_counter() - t0
         return out
-    pairs = camera_pairs(steps, baseline_m(cam.width, focal, rng_m, PARALLAX_SHARE), need)
-    pairs_out = camera_odometry([f.image for f in frames], cam, pairs=pairs, bootstrap=20,
-                                seed=s.seed, image_feats=image_feats)
+    t0 = time.perf_counter()
     mr = rotation_from_motion(lo, pairs_out, T0[:3, :3], T0[:3, 3], t_sigma_m=s.init_error_m)
-    out.seconds["odometry"] = time.perf_counter() - t0
+    out.seconds["odometry"] += time.perf_counter() - t0
     free_lidar = None if mr.free_axis is None else (mr.R.T @ mr.free_axis)
     out.motion = {"lidar_odometry": lo.method, "pairs": len(pairs),
                   "stride": int(np.median([j - i for i, j in pairs])) if pairs else None,
@@ -458,8 +398,7 @@ def _search_round(frames, rings, settings: Settings, Tm: np.ndarray, mr, T_start
     obj = stage.objective
     n = max(1, round(SEARCH_SHARE * stage.n_max))
     axes = _search_axes(mr)
-    resid = mr.residual_deg if np.isfinite(mr.residual_deg) else 0.0
-    band = float(np.clip(BAND_RESIDUALS * resid, MIN_BAND_DEG, s.init_error_deg))
+    band = min(motion_tolerance_deg(mr.residual_deg), s.init_error_deg)
     Rc = mr.R                                        # camera axes (rows), LiDAR frame
     half = s.init_error_m * np.abs(Rc).sum(axis=1)  # the box seen along the camera's axes
     Minv = invert(Tm)
