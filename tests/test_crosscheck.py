@@ -12,7 +12,7 @@ from paretocal.crosscheck import (MIN_BAND_DEG, MotionAgreement, motion_agreemen
 
 @pytest.fixture(scope="module")
 def kitti_motion(raw_frames):
-    return recording_motion(raw_frames, seed=0, points=4000, features_beside=False)
+    return recording_motion(raw_frames, seed=0)
 
 
 def _turned(T: np.ndarray, axis_cam: np.ndarray, deg: float) -> np.ndarray:
@@ -49,7 +49,7 @@ def test_a_standing_rig_shows_one_view(data):
     if not root.is_dir():
         pytest.skip(f"PandaSet sample not found at {root}")
     frames = load_frames(root, "0:4")
-    m = recording_motion(frames, points=4000, features_beside=False)
+    m = recording_motion(frames)
     assert m.standing and not m.moves and m.pairs == [] and m.camera == []
     a = motion_agreement(m, frames[0].T_ref)
     assert not a.applied and a.standing and a.agree and "barely moves" in a.reason

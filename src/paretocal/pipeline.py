@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import Settings, check_population_memory, dataset_settings
-from .crosscheck import CHECK_ODOMETRY_POINTS, MIN_FRAMES, motion_agreement, recording_motion
+from .crosscheck import MIN_FRAMES, motion_agreement, recording_motion
 from .decide import decide, reprojection_deviation
 from .errors import STOP, InputError, Interrupted, SettingsError
 from .features.lidar import GROUP_NAMES
@@ -185,9 +185,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         # odometry that only a result otherwise judged ok needs (the wide start's is reused).
         with _timed(timings, "verdict", progress):
             motion = (wide.recording if wide is not None and wide.recording is not None
-                      else recording_motion(frames, settings.search.seed,
-                                            points=CHECK_ODOMETRY_POINTS,
-                                            features_beside=True))
+                      else recording_motion(frames, settings.search.seed))
             result.evidence = dataclasses.replace(
                 evidence, motion=motion_agreement(motion, T[i]))
             result.reliability = reliability(result)
