@@ -887,7 +887,8 @@ def _fake_result(**over):
     ({"evidence": {"motion": {"applied": True, "directions": 9, "residual_deg": 0.6,
                               "change_deg": 2.5, "tolerance_deg": 1.5}}},
      "the motion disagrees: the directions of travel both sensors see put the camera's "
-     "rotation 2.5 deg from the result's (they agree to 1.5 deg over 9 pairs)"),
+     "rotation 2.5 deg from the result's (they agree to 1.5 deg over 9 directions of travel "
+     "and turns)"),
     ({"evidence": {"motion": {"applied": True, "directions": 9, "residual_deg": 0.6,
                               "change_deg": 0.5, "tolerance_deg": 1.5}}}, None),
     ({"evidence": {"motion": {"applied": False, "standing": True, "travel_m": 0.02,

@@ -5,8 +5,8 @@ import pytest
 
 from paretocal.config import Settings
 from paretocal.geometry import decalibrate, pose_error
-from paretocal.wide import (AFTER_DEG, AFTER_M, WIDE_DEG, WIDE_M, after_settings, baseline_m,
-                            camera_pairs, wanted, wide_start)
+from paretocal.crosscheck import baseline_m, camera_pairs
+from paretocal.wide import AFTER_DEG, AFTER_M, WIDE_DEG, WIDE_M, after_settings, wanted, wide_start
 
 
 def _wide(deg=20.0, m=1.5, **search):

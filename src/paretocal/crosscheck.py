@@ -149,9 +149,22 @@ class RecordingMotion:
         travel less than :attr:`need_m`."""
         return not self.moves and 2 * self.failed < len(self.lidar.pair_poses)
 
+    @property
+    def still_text(self) -> str:
+        """Why the motion gives no direction, in words ("" when the rig moves)."""
+        if self.moves:
+            return ""
+        if not self.standing:
+            return (f"the LiDAR's odometry failed on {self.failed} of "
+                    f"{len(self.lidar.pair_poses)} pairs of consecutive frames")
+        return (f"the rig barely moves: the LiDAR travels {self.travel_m:.2f} m over the "
+                f"frames, and a direction of travel needs about {self.need_m:.1f} m "
+                f"({100 * MIN_PARALLAX_SHARE:.0f} % of the image's width in parallax at the "
+                f"scene's median range, {self.range_m:.0f} m)")
 
-def recording_motion(frames: list[Frame], seed: int = 0, *, points: int = ODOMETRY_POINTS,
-                     features_beside: bool = True) -> RecordingMotion:
+
+def recording_motion(frames: list[Frame], seed: int = 0, *,
+                     points: int = ODOMETRY_POINTS) -> RecordingMotion:
     """The motion of the LiDAR and of the camera over ``frames``.
 
     Parameters
@@ -163,9 +176,6 @@ def recording_motion(frames: list[Frame], seed: int = 0, *, points: int = ODOMET
         Seeds the odometry's subsampling and the visual odometry's bootstrap.
     points : int
         Points per sweep of the LiDAR's odometry.
-    features_beside : bool
-        Extract every image's features in a thread beside the LiDAR's odometry (the wide
-        start: the time counts); False: only the paired images', after it.
 
     Returns
     -------
@@ -179,16 +189,12 @@ def recording_motion(frames: list[Frame], seed: int = 0, *, points: int = ODOMET
     clouds = [f.points[:, :3] for f in frames]
     cam = frames[0].camera
     images = [f.image for f in frames]
-    feats = None
-    if features_beside:
-        # The images' features do not depend on the LiDAR's odometry: extracted beside it
-        # (OpenCV and the registration's numpy and scipy work release the interpreter).
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            pending = pool.submit(image_features, images, cam)
-            lo = lidar_odometry(clouds, points=points, seed=seed)
-            feats = pending.result()
-    else:
+    # The images' features do not depend on the LiDAR's odometry: extracted beside it
+    # (OpenCV and the registration's numpy and scipy work release the interpreter).
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(image_features, images, cam)
         lo = lidar_odometry(clouds, points=points, seed=seed)
+        feats = pending.result()
     rng_m = float(np.median(np.linalg.norm(clouds[0], axis=1)))
     focal = float(cam.K[0, 0])
     steps = np.where(lo.standing, 0.0, lo.translation_m)
@@ -198,8 +204,6 @@ def recording_motion(frames: list[Frame], seed: int = 0, *, points: int = ODOMET
     if out.moves:
         out.pairs = camera_pairs(steps, baseline_m(cam.width, focal, rng_m, PARALLAX_SHARE),
                                  out.need_m)
-        if feats is None:
-            feats = image_features(images, cam, sorted({k for p in out.pairs for k in p}))
         out.camera = camera_odometry(images, cam, pairs=out.pairs, bootstrap=20, seed=seed,
                                      image_feats=feats)
     out.seconds = time.perf_counter() - t0
@@ -281,7 +285,7 @@ class MotionAgreement:
                    need_m=num("need_m"), directions=int(doc.get("directions", 0)),
                    turns=int(doc.get("turns", 0)), residual_deg=num("residual_deg"),
                    change_deg=num("change_deg"), tolerance_deg=num("tolerance_deg"),
-                   seconds=num("seconds") if doc.get("seconds") is not None else 0.0)
+                   seconds=float(doc.get("seconds") or 0.0))
 
 
 def motion_agreement(motion: RecordingMotion, T_result: np.ndarray) -> MotionAgreement:
@@ -307,14 +311,7 @@ def motion_agreement(motion: RecordingMotion, T_result: np.ndarray) -> MotionAgr
     seen = MotionAgreement(False, travel_m=motion.travel_m, need_m=motion.need_m,
                            seconds=motion.seconds)
     if not motion.moves:
-        why = (f"the rig barely moves: the LiDAR travels {motion.travel_m:.2f} m over the "
-               f"frames, and a direction of travel needs about {motion.need_m:.1f} m "
-               f"({100 * MIN_PARALLAX_SHARE:.0f} % of the image's width in parallax at the "
-               f"scene's median range, {motion.range_m:.0f} m)")
-        if not motion.standing:
-            why = (f"the LiDAR's odometry failed on {motion.failed} of "
-                   f"{len(motion.lidar.pair_poses)} pairs of consecutive frames")
-        return replace(seen, reason=why, standing=motion.standing)
+        return replace(seen, reason=motion.still_text, standing=motion.standing)
     mr = rotation_from_motion(motion.lidar, motion.camera, T[:3, :3], T[:3, 3],
                               t_sigma_m=USABLE_M)
     seen = replace(seen, directions=mr.directions, turns=mr.turns)

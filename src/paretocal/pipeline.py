@@ -180,12 +180,12 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
         wide=wide)
     result.reliability = reliability(result)
-    if _motion_checked(frames, settings, wide, result.reliability.ok):
+    measured = None if wide is None else wide.recording
+    if _motion_checked(frames, settings, measured is not None, result.reliability.ok):
         # The recording's motion, when nothing else casts doubt on the result: seconds of
         # odometry that only a result otherwise judged ok needs (the wide start's is reused).
         with _timed(timings, "verdict", progress):
-            motion = (wide.recording if wide is not None and wide.recording is not None
-                      else recording_motion(frames, settings.search.seed))
+            motion = measured or recording_motion(frames, settings.search.seed)
             result.evidence = dataclasses.replace(
                 evidence, motion=motion_agreement(motion, T[i]))
             result.reliability = reliability(result)
@@ -195,15 +195,16 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     return result
 
 
-def _motion_checked(frames: list[Frame], settings: Settings, wide, ok: bool) -> bool:
+def _motion_checked(frames: list[Frame], settings: Settings, measured: bool, ok: bool) -> bool:
     """Whether the verdict checks the result against the recording's motion
     (:mod:`paretocal.crosscheck`): ``decision.motion_check`` on, at least
     :data:`~paretocal.crosscheck.MIN_FRAMES` frames of one camera, and either the wide start
-    measured the motion already or nothing else casts doubt on the result (``ok``)."""
+    measured the motion already (``measured``) or nothing else casts doubt on the result
+    (``ok``)."""
     if (not settings.decision.motion_check or len(frames) < MIN_FRAMES
             or any(f.camera.mount is not None for f in frames)):
         return False
-    return ok or (wide is not None and wide.recording is not None)
+    return ok or measured
 
 
 #: What the run is doing during each timed phase, for the line an interrupt prints.

@@ -1424,7 +1424,8 @@ def _cross_reasons(mc: MotionAgreement | None, photo, n_frames: int) -> list[str
         reasons.append(
             f"the motion disagrees: the directions of travel both sensors see put the camera's "
             f"rotation {mc.change_deg:.2g} deg from the result's (they agree to "
-            f"{mc.tolerance_deg:.2g} deg over {mc.directions + mc.turns} pairs): the frames' "
+            f"{mc.tolerance_deg:.2g} deg over {mc.directions + mc.turns} directions of travel "
+            "and turns): the frames' "
             "edges all favour a wrong pose; give a better start, or frames with structure at "
             "several distances")
     return reasons

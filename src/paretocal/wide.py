@@ -41,8 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import Settings
-from .crosscheck import (MIN_FRAMES, MIN_PARALLAX_SHARE, RecordingMotion, baseline_m,  # noqa: F401
-                         camera_pairs, motion_tolerance_deg, recording_motion)
+from .crosscheck import MIN_FRAMES, RecordingMotion, motion_tolerance_deg, recording_motion
 from .egomotion import rotation_from_motion
 from .geometry import correction_params, invert, pose_error
 from .io.frame import Frame
@@ -275,14 +274,10 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     out.recording = motion
     out.seconds["odometry"] = motion.seconds
     lo, pairs, pairs_out = motion.lidar, motion.pairs, motion.camera
-    path = motion.travel_m
     if not motion.moves:
-        out.reasons.append(f"the rig barely moves: the LiDAR travels {path:.2f} m over the "
-                           f"frames, and a direction of travel needs about {motion.need_m:.1f} m "
-                           f"({100 * MIN_PARALLAX_SHARE:.0f} % of the image's width in "
-                           f"parallax at the scene's median range, {motion.range_m:.0f} m); a "
-                           f"static rig gives no direction of travel: give a start within "
-                           f"{WIDE_DEG:g} deg / {WIDE_M:g} m, or frames taken while moving")
+        out.reasons.append(f"{motion.still_text}; a static rig gives no direction of travel: "
+                           f"give a start within {WIDE_DEG:g} deg / {WIDE_M:g} m, or frames "
+                           "taken while moving")
         return out
     t0 = time.perf_counter()
     mr = rotation_from_motion(lo, pairs_out, T0[:3, :3], T0[:3, 3], t_sigma_m=s.init_error_m)
@@ -290,7 +285,7 @@ def wide_start(frames: list[Frame], T_init: np.ndarray, settings: Settings,
     free_lidar = None if mr.free_axis is None else (mr.R.T @ mr.free_axis)
     out.motion = {"lidar_odometry": lo.method, "pairs": len(pairs),
                   "stride": int(np.median([j - i for i, j in pairs])) if pairs else None,
-                  "travel_m": round(path, 3),
+                  "travel_m": round(motion.travel_m, 3),
                   "directions": mr.directions, "turns": mr.turns, "reversed": mr.reversed,
                   "free_axis_lidar": None if free_lidar is None
                   else [round(float(v), 4) for v in free_lidar],
@@ -568,4 +563,4 @@ def _search_axes(mr) -> np.ndarray:
 
 
 __all__ = ["AFTER_DEG", "AFTER_M", "WIDE_DEG", "WIDE_M", "PhotoCheck", "WideStart",
-           "after_settings", "baseline_m", "camera_pairs", "photo_check", "wanted", "wide_start"]
+           "after_settings", "photo_check", "wanted", "wide_start"]
