@@ -399,3 +399,30 @@ def test_deskew_off_unquoted_in_a_config_file(tmp_path):
 
     (tmp_path / "c.yaml").write_text("motion: {deskew: off}\n")
     assert load_settings(tmp_path / "c.yaml").validate().motion.deskew == "off"
+
+
+def test_normals_match_a_batched_eigendecomposition():
+    """The compiled normals (Jacobi rotations per neighbourhood) against numpy's ``eigh``:
+    planarity to 1e-12 and the same normal up to sign, on planes, lines, scatter and a
+    neighbourhood of one repeated point (planarity 0, no NaN)."""
+    from paretocal.lidar.registration import _normals, neighbours
+
+    rng = np.random.default_rng(3)
+    plane = np.column_stack([rng.uniform(-5, 5, (400, 2)), 0.01 * rng.standard_normal(400)])
+    tilt = Rotation.from_rotvec([0.3, -0.5, 0.2]).as_matrix()
+    line = np.column_stack([rng.uniform(0, 10, 200), 1e-3 * rng.standard_normal((200, 2))])
+    pts = np.vstack([plane @ tilt.T, line + 20.0, rng.standard_normal((300, 3)) - 20.0])
+    nb = neighbours(pts, 12)
+    normals, planarity = _normals(pts, nb)
+    d = pts[nb] - pts[nb].mean(axis=1, keepdims=True)
+    vals, vecs = np.linalg.eigh(d.transpose(0, 2, 1) @ d)
+    expect = np.clip((vals[:, 1] - vals[:, 0]) / vals[:, 2], 0.0, 1.0)
+    np.testing.assert_allclose(planarity, expect, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-12)
+    cos = np.abs(np.einsum("ij,ij->i", normals, vecs[:, :, 0]))
+    assert cos[expect > 0.05].min() > 1 - 1e-9
+    # The plane's points carry its normal (the tilted z axis) and a planarity near 1.
+    assert np.abs(normals[:400] @ tilt[:, 2]).min() > 0.99 and np.median(planarity[:400]) > 0.5
+    same = np.zeros((12, 3))
+    n0, p0 = _normals(same, np.tile(np.arange(12), (12, 1)))
+    assert np.all(p0 == 0.0) and np.isfinite(n0).all()
