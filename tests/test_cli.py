@@ -372,3 +372,19 @@ class TestCompare:
         code, _, err = _run(capsys, "compare", init, init, "--page", tmp_path / "p.html")
         assert code == 2 and "--page needs SOURCE" in err and not (tmp_path / "p.html").exists()
         assert "Traceback" not in err
+
+
+def test_the_motion_line_says_what_the_motion_found():
+    from paretocal.cli.check import motion_line
+    from paretocal.crosscheck import MotionAgreement
+
+    agree = MotionAgreement(True, travel_m=4.05, need_m=0.42, directions=9, residual_deg=0.62,
+                            change_deg=0.52, tolerance_deg=1.5)
+    assert motion_line(agree) == (
+        "motion: the rotation agrees with the recording's motion (0.52 deg apart about the "
+        "axes the motion observes, tolerance 1.5 deg from 9 direction(s) of travel and 0 "
+        "turn(s))")
+    still = MotionAgreement(False, reason="the rig barely moves: the LiDAR travels 0.03 m",
+                            standing=True)
+    assert motion_line(still) == ("motion: not compared: the rig barely moves: the LiDAR "
+                                  "travels 0.03 m")

@@ -135,6 +135,17 @@ def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
     assert json.dumps(CheckReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
     weak = CheckReport.from_dict(dict(doc, notes=["only 2 frame(s)"]))
     assert weak.weak and weak.to_dict()["weak"] is True
+    # With the motion compared: written last, and read back the same.
+    from dataclasses import replace
+
+    from paretocal.crosscheck import MotionAgreement
+
+    moving = replace(named, motion=MotionAgreement(True, travel_m=4.05, need_m=0.42,
+                                                   directions=9, residual_deg=0.62,
+                                                   change_deg=0.52, tolerance_deg=1.5))
+    text = json.dumps(moving.to_dict(), indent=2)
+    assert list(moving.to_dict())[-1] == "motion" and moving.to_dict()["motion"]["agree"]
+    assert json.dumps(CheckReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
 
 
 @pytest.mark.slow
@@ -153,6 +164,54 @@ class TestCheckOnKitti:
         T = raw_frames[0].T_ref @ correction_matrix(perturbation)
         r = check_extrinsic(raw_frames, T)
         assert r.verdict == verdict, r.to_dict()["moved"]
+        # The rig drives straight: roll (about the LiDAR's x, the direction of travel) and
+        # translation are not the motion's to judge; it agrees with all three.
+        assert r.motion is not None and r.motion.applied and r.motion.agree, r.motion
+
+    def test_the_motion_contradicts_a_rotation_across_the_travel(self, raw_frames):
+        """Three degrees of pitch (about the LiDAR's y, across the direction of travel): the
+        edges move it, and the motion disagrees on its own."""
+        from paretocal.check import check_extrinsic
+        from paretocal.geometry import correction_matrix
+
+        T = raw_frames[0].T_ref @ correction_matrix([0, 0, 0, 0, 3.0, 0])
+        r = check_extrinsic(raw_frames, T)
+        assert r.verdict == "miscalibrated"
+        assert r.motion.applied and not r.motion.agree and r.motion.change_deg > 2.0, r.motion
+        assert r.to_dict()["motion"]["agree"] is False
+
+    def test_a_rotation_the_motion_contradicts_is_miscalibrated_whatever_the_edges_say(
+            self, raw_frames, monkeypatch, capsys):
+        """The reference, which the edges keep (score below 1), with a motion that
+        contradicts it: miscalibrated, and the command line says why."""
+        import paretocal.check as check
+        from paretocal.crosscheck import MotionAgreement
+
+        def contradicting(motion, T):
+            return MotionAgreement(True, travel_m=1.0, need_m=0.4, directions=4,
+                                   residual_deg=0.5, change_deg=3.0, tolerance_deg=1.5)
+
+        monkeypatch.setattr(check, "motion_agreement", contradicting)
+        r = check.check_extrinsic(raw_frames[::4], raw_frames[0].T_ref)
+        assert r.score <= 1.0 and r.verdict == "miscalibrated" and not r.weak, r.score
+        from paretocal.cli.check import motion_line
+
+        line = motion_line(r.motion)
+        assert "DISAGREES" in line and "3.00 deg apart" in line and "4 direction(s)" in line
+
+    def test_frames_of_a_standing_rig_make_a_weak_check(self, raw_frames, monkeypatch):
+        import paretocal.check as check
+        from paretocal.crosscheck import MotionAgreement
+
+        def standing(motion, T):
+            return MotionAgreement(False, reason="the rig barely moves", standing=True,
+                                   travel_m=0.03, need_m=0.42)
+
+        monkeypatch.setattr(check, "motion_agreement", standing)
+        r = check.check_extrinsic(raw_frames[::4], raw_frames[0].T_ref)
+        assert r.weak and r.verdict == "calibrated", r.notes
+        assert r.notes[0].startswith("the rig stands still over the 5 frames (the LiDAR "
+                                     "travels 0.03 m; the view changes with about 0.42 m)")
 
     def test_a_cloud_in_a_vehicle_frame_is_checked_like_the_sensor_frame(self, raw_frames):
         """The check does the LiDAR steps of a calibration: the sensor located in a cloud

@@ -8,6 +8,11 @@ it moves with tolerances halfway between that bias and the errors worth flagging
 KITTI frames the reference moves 0.15 deg / 1.7 cm (3.2 px), extrinsics perturbed by 1 deg or
 10 cm on one axis move 4.7-16.0 px (all judged miscalibrated), so 0.5 deg / 5 cm are the
 defaults (docs/trusting.md).
+
+A wrong extrinsic can also sit in a wrong local optimum of the edges, which then does not move
+it. On frames of a moving rig the check therefore also compares its rotation with the one the
+recording's motion gives (:mod:`paretocal.crosscheck`, evidence that shares nothing with the
+edges): a rotation the motion contradicts is miscalibrated whatever the edges say.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from .config import Settings
+from .crosscheck import MIN_FRAMES, MotionAgreement, motion_agreement, recording_motion
 from .geometry import pose_error
 from .io.frame import Frame
 from .quality import (Quality, correction_between, displacement_px, local_optimum,
@@ -41,7 +47,8 @@ class CheckReport:
     Attributes
     ----------
     verdict : str
-        ``"calibrated"`` or ``"miscalibrated"``.
+        ``"calibrated"`` or ``"miscalibrated"``: miscalibrated when :attr:`score` exceeds 1
+        or the recording's motion contradicts the rotation (:attr:`motion`).
     score : float
         The move to the local optimum relative to the tolerances (the larger of rotation over
         its tolerance and translation over its); above 1 is miscalibrated.
@@ -74,6 +81,10 @@ class CheckReport:
     extrinsic_from : str or None
         Where the extrinsic checked came from (``paretocal check``: its file, or
         ``"dataset"``); written only when set.
+    motion : MotionAgreement or None
+        The rotation against the recording's motion (:func:`~paretocal.crosscheck.motion_agreement`);
+        None when not looked at (fewer than :data:`~paretocal.crosscheck.MIN_FRAMES` frames,
+        or ``decision.motion_check`` off).
     """
 
     verdict: str
@@ -91,6 +102,7 @@ class CheckReport:
     frames: tuple[str, ...]
     features: FeatureCounts
     extrinsic_from: str | None = None
+    motion: MotionAgreement | None = None
 
     @property
     def weak(self) -> bool:
@@ -137,6 +149,8 @@ class CheckReport:
         }
         if self.extrinsic_from is not None:
             out["extrinsic_from"] = self.extrinsic_from
+        if self.motion is not None:
+            out["motion"] = self.motion.to_dict()
         return out
 
     @classmethod
@@ -164,7 +178,9 @@ class CheckReport:
                    quality=Quality.from_dict(doc.get("quality") or {}),
                    frames=tuple(str(f) for f in doc.get("frames") or []),
                    features=FeatureCounts.from_dict(doc.get("features") or {}),
-                   extrinsic_from=doc.get("extrinsic_from"))
+                   extrinsic_from=doc.get("extrinsic_from"),
+                   motion=(MotionAgreement.from_dict(doc["motion"]) if doc.get("motion")
+                           else None))
 
     def with_source(self, extrinsic_from: str) -> "CheckReport":
         """The report naming where the extrinsic checked came from.
@@ -200,13 +216,17 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         Translation tolerance (cm) of the move to the local optimum.
     progress : callable, optional
         ``progress(stage, done, total)``, told of the feature extraction per frame and of the
-        three steps after it (neighbours, local optimum, quality report).
+        steps after it (neighbours, local optimum, quality report, and the motion when it is
+        looked at).
 
     Returns
     -------
     CheckReport
         ``verdict`` ("calibrated" or "miscalibrated"), ``score`` (the move to the local optimum
-        relative to the tolerances; above 1 is miscalibrated), the move (``moved_deg``,
+        relative to the tolerances; above 1 is miscalibrated), ``motion`` (the rotation
+        against the recording's motion, which also makes it miscalibrated when they
+        disagree; with at least :data:`~paretocal.crosscheck.MIN_FRAMES` frames and
+        ``decision.motion_check`` on), the move (``moved_deg``,
         ``moved_m``, ``moved_px``), ``neighbour_fraction`` and ``best_neighbour_gain_px``,
         ``T_checked`` (``T``), ``T_local_optimum``, the ``quality`` report at the local
         optimum, and ``weak`` with ``notes``: True when the check itself has too little to go
@@ -230,16 +250,22 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max
+    moving = settings.decision.motion_check and len(frames) >= MIN_FRAMES
+    steps = 4 if moving else 3
     frac, gain = neighbour_fraction(obj, x0, NEIGHBOUR_STEP)
-    tick("check", 1, 3)
+    tick("check", 1, steps)
     xo = local_optimum(obj, x0)
-    tick("check", 2, 3)
+    tick("check", 2, steps)
     T_opt = obj.transforms(xo[None])[0]
     move = pose_error(T_opt, T)
     score = max(float(move["rotation_deg"]) / rot_tol_deg,
                 float(move["translation_cm"]) / trans_tol_cm)
     quality = quality_report(obj, xo, pixel_fd_step(obj, xo))
-    tick("check", 3, 3)
+    tick("check", 3, steps)
+    motion = None
+    if moving:
+        motion = motion_agreement(recording_motion(lidar.frames, settings.search.seed), T)
+        tick("check", 4, steps)
     from .pipeline import RELIABLE_MIN_FRAMES
 
     notes = []
@@ -247,14 +273,21 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         notes.append(f"only {len(frames)} frame(s): the check itself is weak (one scene's "
                      "biases can move a correct extrinsic or hold a wrong one); check on at "
                      f"least {RELIABLE_MIN_FRAMES} frames of varied scenes")
+    elif motion is not None and motion.standing:
+        notes.append(f"the rig stands still over the {len(frames)} frames (the LiDAR travels "
+                     f"{motion.travel_m:.2g} m; the view changes with about "
+                     f"{motion.need_m:.2g} m): they show the scene from one place, whose "
+                     "biases can move a correct extrinsic or hold a wrong one however many "
+                     "frames there are; check on frames taken while moving")
+    wrong = score > 1.0 or (motion is not None and not motion.agree)
     return CheckReport(
-        verdict="miscalibrated" if score > 1.0 else "calibrated", score=float(score),
+        verdict="miscalibrated" if wrong else "calibrated", score=float(score),
         notes=tuple(notes), tolerance_deg=float(rot_tol_deg),
         tolerance_m=float(trans_tol_cm) / 100.0, moved_px=displacement_px(obj, x0, xo),
         neighbour_fraction=frac, best_neighbour_gain_px=gain,
         neighbour_step=NEIGHBOUR_STEP.copy(), T_checked=T, T_local_optimum=T_opt,
         quality=quality, frames=tuple(f.name for f in frames),
-        features=feature_counts(stage.feats))
+        features=feature_counts(stage.feats), motion=motion)
 
 
 

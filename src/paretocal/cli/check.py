@@ -13,6 +13,7 @@ from ._common import StageProgress, setup_logging
 from .options import Camera, ConfigFile, Frames, Quiet, Verbose
 
 if TYPE_CHECKING:  # pragma: no cover
+    from ..crosscheck import MotionAgreement
     from ..stage import FeatureCounts
 
 
@@ -64,6 +65,8 @@ def check(
                f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
                f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
     typer.echo(f"paretocal: {features_line(r.features)}")
+    if r.motion is not None:
+        typer.echo(f"paretocal: {motion_line(r.motion)}")
     for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
 
@@ -87,3 +90,17 @@ def features_line(features: FeatureCounts) -> str:
         line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
                  f"{noise[0].frame}: {noise[0].reason})")
     return line
+
+
+def motion_line(motion: MotionAgreement) -> str:
+    """The rotation against the recording's motion, in one line
+    (:class:`~paretocal.crosscheck.MotionAgreement`)."""
+    if not motion.applied:
+        return f"motion: not compared: {motion.reason}"
+    seen = (f"{motion.change_deg:.2f} deg apart about the axes the motion observes, "
+            f"tolerance {motion.tolerance_deg:.2g} deg from {motion.directions} direction(s) "
+            f"of travel and {motion.turns} turn(s)")
+    if motion.agree:
+        return f"motion: the rotation agrees with the recording's motion ({seen})"
+    return (f"motion: the rotation DISAGREES with the recording's motion ({seen}): it is "
+            "off about an axis the motion observes, whatever the edges say; calibrate again")
