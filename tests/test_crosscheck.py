@@ -53,6 +53,30 @@ def test_a_standing_rig_shows_one_view(data):
     assert m.standing and not m.moves and m.pairs == [] and m.camera == []
     a = motion_agreement(m, frames[0].T_ref)
     assert not a.applied and a.standing and a.agree and "barely moves" in a.reason
+    # The LiDAR alone tells it too (what a result flagged already is looked at for).
+    lidar = recording_motion(frames, camera=False)
+    assert lidar.standing and not lidar.camera_measured
+    assert motion_agreement(lidar, frames[0].T_ref).standing
+
+
+def test_the_lidar_alone_sees_a_moving_rig_but_gives_no_rotation(raw_frames):
+    m = recording_motion(raw_frames, seed=0, camera=False)
+    assert m.moves and not m.camera_measured and m.pairs == [] and m.camera == []
+    a = motion_agreement(m, raw_frames[0].T_ref)
+    assert not a.applied and a.agree and not a.standing, a
+    assert "only the LiDAR's motion was measured" in a.reason
+
+
+def test_sweeps_with_too_few_points_fail_the_odometry_not_the_run(raw_frames):
+    """A frame whose cloud is all but empty (a dropped sweep) is a failed pair of the
+    odometry, never an exception out of the verdict."""
+    from dataclasses import replace
+
+    frames = [raw_frames[0], replace(raw_frames[1], points=raw_frames[1].points[:5]),
+              raw_frames[2]]
+    m = recording_motion(frames, camera=False)
+    assert m.failed == 2 and not m.standing and not m.moves
+    assert "odometry failed on 2 of 2" in motion_agreement(m, raw_frames[0].T_ref).reason
 
 
 def test_the_record_round_trips():

@@ -138,3 +138,28 @@ def test_frames_without_points_in_view_do_not_count(raw_frames):
     ok = calibrate(raw_frames[:3], raw_frames[0].T_ref, _small())
     assert ok.feature_counts.frames_contributing == 3
     assert not any("frames have LiDAR feature points" in x for x in ok.reliability.reasons)
+
+
+def test_the_motion_check_runs_by_what_the_verdict_needs(raw_frames):
+    """Both sensors' motion for a result judged ok (or measured by a wide start already), the
+    LiDAR's alone for one flagged already, none for fewer than 3 frames or when switched off."""
+    from paretocal.pipeline import _motion_check
+
+    s = Settings()
+    assert _motion_check(raw_frames, s, measured=False, ok=True) == "both"
+    assert _motion_check(raw_frames, s, measured=True, ok=False) == "both"
+    assert _motion_check(raw_frames, s, measured=False, ok=False) == "lidar"
+    assert _motion_check(raw_frames[:2], s, measured=False, ok=True) == ""
+    off = s.replace(decision={"motion_check": False})
+    assert _motion_check(raw_frames, off, measured=False, ok=True) == ""
+
+
+def test_a_flagged_run_on_frames_of_a_standing_rig_says_so(raw_frames):
+    """Three copies of one frame: whatever else flags the result, the verdict also says the
+    frames show one view (the LiDAR's odometry alone tells it)."""
+    frames = [dataclasses.replace(raw_frames[0], name=f"copy{k}") for k in range(3)]
+    r = calibrate(frames, raw_frames[0].T_ref, _small())
+    mc = r.evidence.motion
+    assert mc is not None and mc.standing and not mc.applied, mc
+    assert any(x.startswith("the rig stands still over the 3 frames")
+               for x in r.reliability.reasons), r.reliability.reasons

@@ -21,6 +21,7 @@ cameras is checked camera by camera, by each camera's own run).
 
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -127,6 +128,9 @@ class RecordingMotion:
         Consecutive pairs whose registration failed.
     seconds : float
         Wall time (s).
+    camera_measured : bool
+        Whether the camera's motion was measured (False: the LiDAR's alone, which tells a rig
+        standing still but gives no rotation to compare with).
     """
 
     lidar: LidarOdometry
@@ -137,6 +141,7 @@ class RecordingMotion:
     range_m: float = 0.0
     failed: int = 0
     seconds: float = 0.0
+    camera_measured: bool = True
 
     @property
     def moves(self) -> bool:
@@ -164,7 +169,7 @@ class RecordingMotion:
 
 
 def recording_motion(frames: list[Frame], seed: int = 0, *,
-                     points: int = ODOMETRY_POINTS) -> RecordingMotion:
+                     points: int = ODOMETRY_POINTS, camera: bool = True) -> RecordingMotion:
     """The motion of the LiDAR and of the camera over ``frames``.
 
     Parameters
@@ -176,11 +181,14 @@ def recording_motion(frames: list[Frame], seed: int = 0, *,
         Seeds the odometry's subsampling and the visual odometry's bootstrap.
     points : int
         Points per sweep of the LiDAR's odometry.
+    camera : bool
+        Measure the camera's motion too (False: the LiDAR's alone, a third of the time on the
+        KITTI drive, enough to tell a rig standing still).
 
     Returns
     -------
     RecordingMotion
-        Without camera pairs when the rig barely moves.
+        Without camera pairs when the rig barely moves or ``camera`` is False.
     """
     if len(frames) < MIN_FRAMES:
         raise ValueError(f"recording_motion needs at least {MIN_FRAMES} frames, "
@@ -189,19 +197,33 @@ def recording_motion(frames: list[Frame], seed: int = 0, *,
     clouds = [f.points[:, :3] for f in frames]
     cam = frames[0].camera
     images = [f.image for f in frames]
-    # The images' features do not depend on the LiDAR's odometry: extracted beside it
-    # (OpenCV and the registration's numpy and scipy work release the interpreter).
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        pending = pool.submit(image_features, images, cam)
-        lo = lidar_odometry(clouds, points=points, seed=seed)
-        feats = pending.result()
     rng_m = float(np.median(np.linalg.norm(clouds[0], axis=1)))
     focal = float(cam.K[0, 0])
-    steps = np.where(lo.standing, 0.0, lo.translation_m)
-    out = RecordingMotion(lo, travel_m=float(np.nansum(steps)),
-                          need_m=baseline_m(cam.width, focal, rng_m, MIN_PARALLAX_SHARE),
-                          range_m=rng_m, failed=int(np.sum(~np.isfinite(lo.translation_m))))
+
+    def lidar() -> RecordingMotion:
+        lo = lidar_odometry(clouds, points=points, seed=seed)
+        steps = np.where(lo.standing, 0.0, lo.translation_m)
+        return RecordingMotion(lo, travel_m=float(np.nansum(steps)),
+                               need_m=baseline_m(cam.width, focal, rng_m, MIN_PARALLAX_SHARE),
+                               range_m=rng_m, failed=int(np.sum(~np.isfinite(lo.translation_m))),
+                               camera_measured=camera)
+
+    if not camera:
+        out = lidar()
+        out.seconds = time.perf_counter() - t0
+        return out
+    # The images' features do not depend on the LiDAR's odometry: extracted beside it
+    # (OpenCV and the registration's numpy and scipy work release the interpreter), and
+    # stopped once the LiDAR shows a rig standing still, which needs none of them.
+    stop = threading.Event()
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(image_features, images, cam, stop=stop)
+        out = lidar()
+        if not out.moves:
+            stop.set()
+        feats = pending.result()
     if out.moves:
+        steps = np.where(out.lidar.standing, 0.0, out.lidar.translation_m)
         out.pairs = camera_pairs(steps, baseline_m(cam.width, focal, rng_m, PARALLAX_SHARE),
                                  out.need_m)
         out.camera = camera_odometry(images, cam, pairs=out.pairs, bootstrap=20, seed=seed,
@@ -312,6 +334,10 @@ def motion_agreement(motion: RecordingMotion, T_result: np.ndarray) -> MotionAgr
                            seconds=motion.seconds)
     if not motion.moves:
         return replace(seen, reason=motion.still_text, standing=motion.standing)
+    if not motion.camera_measured:
+        return replace(seen, reason="the rig moves, but only the LiDAR's motion was measured "
+                                    "(a result other checks flag already is only looked at "
+                                    "for a rig standing still)")
     mr = rotation_from_motion(motion.lidar, motion.camera, T[:3, :3], T[:3, 3],
                               t_sigma_m=USABLE_M)
     seen = replace(seen, directions=mr.directions, turns=mr.turns)

@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -73,7 +74,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from .camera import Camera
-from .lidar.registration import prepare_cloud, register_pair, register_prepared
+from .lidar.registration import (MIN_POINTS, prepare_cloud, register_pair,
+                                 register_prepared)
 
 log = logging.getLogger(__name__)
 
@@ -309,20 +311,30 @@ def lidar_odometry(clouds: Sequence[np.ndarray], *, method: str = "auto",  # noq
         secs[:] = s[1:]
         for k in range(K - 1):
             pair[k] = np.linalg.inv(P[k]) @ P[k + 1]
+            if min(len(clouds[k]), len(clouds[k + 1])) < MIN_POINTS:
+                continue                            # no covariance for a dropped sweep
             reg = register_pair(clouds[k + 1], clouds[k], pair[k], points=points, block=block,
                                 refine=False, seed=seed)
             if reg is not None:
                 cov[k] = reg.covariance
     else:
         # Each sweep is the source of one pair and the target of the next: subsampled once.
+        # A sweep with too few points (a dropped one) fails both its pairs.
         rng = np.random.default_rng(seed)
-        target = prepare_cloud(clouds[0], points, rng)
+
+        def prepared(cloud, start):
+            return None if len(cloud) < MIN_POINTS else prepare_cloud(cloud, points, rng, start)
+
+        target = prepared(clouds[0], None)
+        voxel = None if target is None else target.voxel
         prev = None
         for k in range(K - 1):
             t0 = time.perf_counter()
-            source = prepare_cloud(clouds[k + 1], points, rng, start=target.voxel)
-            reg = register_prepared(source, target, prev, max_translation=max_translation,
-                                    block=block)
+            source = prepared(clouds[k + 1], voxel)
+            voxel = voxel if source is None else source.voxel
+            reg = (None if source is None or target is None else
+                   register_prepared(source, target, prev, max_translation=max_translation,
+                                     block=block))
             target = source
             secs[k] = time.perf_counter() - t0
             if reg is None:
@@ -621,15 +633,19 @@ def camera_odometry(images: Sequence[np.ndarray], camera: Camera, *,  # noqa: PL
 
 def image_features(images: Sequence[np.ndarray], camera: Camera, indices=None, *,
                    mask: np.ndarray | None = None, features: int = 4000,
-                   max_ray_deg: float = 80.0) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+                   max_ray_deg: float = 80.0,
+                   stop: threading.Event | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """SIFT features of the images of index ``indices`` (all by default) as
     :func:`camera_odometry` matches them: by index, the unit rays (M, 3) of the keypoints
-    within ``max_ray_deg`` of the optical axis and their descriptors (M, 128)."""
+    within ``max_ray_deg`` of the optical axis and their descriptors (M, 128). ``stop``, once
+    set, ends the extraction after the image at hand (the images done so far are returned)."""
     # OpenCV's stubs declare SIFT only as the class SIFT, not its module-level factory.
     sift = cv2.SIFT_create(nfeatures=int(features))  # type: ignore[attr-defined]
     cos_max = math.cos(math.radians(max_ray_deg))
     out = {}
     for k in range(len(images)) if indices is None else indices:
+        if stop is not None and stop.is_set():
+            break
         uv, desc = _features(images[k], mask, sift)
         rays = camera.unproject(uv) if len(uv) else np.zeros((0, 3))
         good = np.isfinite(rays).all(axis=1) & (np.nan_to_num(rays[:, 2]) > cos_max)

@@ -181,11 +181,14 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         wide=wide)
     result.reliability = reliability(result)
     measured = None if wide is None else wide.recording
-    if _motion_checked(frames, settings, measured is not None, result.reliability.ok):
-        # The recording's motion, when nothing else casts doubt on the result: seconds of
-        # odometry that only a result otherwise judged ok needs (the wide start's is reused).
+    kind = _motion_check(frames, settings, measured is not None, result.reliability.ok)
+    if kind:
+        # The recording's motion (the wide start's is reused). Both sensors' for a result
+        # nothing else casts doubt on; for one flagged already, the LiDAR's alone, a third of
+        # the time, which still tells the user when the frames show one view.
         with _timed(timings, "verdict", progress):
-            motion = measured or recording_motion(frames, settings.search.seed)
+            motion = measured or recording_motion(frames, settings.search.seed,
+                                                  camera=kind == "both")
             result.evidence = dataclasses.replace(
                 evidence, motion=motion_agreement(motion, T[i]))
             result.reliability = reliability(result)
@@ -195,16 +198,17 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     return result
 
 
-def _motion_checked(frames: list[Frame], settings: Settings, measured: bool, ok: bool) -> bool:
-    """Whether the verdict checks the result against the recording's motion
-    (:mod:`paretocal.crosscheck`): ``decision.motion_check`` on, at least
-    :data:`~paretocal.crosscheck.MIN_FRAMES` frames of one camera, and either the wide start
-    measured the motion already (``measured``) or nothing else casts doubt on the result
-    (``ok``)."""
+def _motion_check(frames: list[Frame], settings: Settings, measured: bool, ok: bool) -> str:
+    """How the verdict checks the result against the recording's motion
+    (:mod:`paretocal.crosscheck`): ``"both"`` sensors' motion when the wide start measured it
+    already (``measured``) or nothing else casts doubt on the result (``ok``), ``"lidar"``
+    alone (whether the rig stands still) otherwise, and ``""`` not at all: with
+    ``decision.motion_check`` off, fewer than :data:`~paretocal.crosscheck.MIN_FRAMES`
+    frames, or several cameras."""
     if (not settings.decision.motion_check or len(frames) < MIN_FRAMES
             or any(f.camera.mount is not None for f in frames)):
-        return False
-    return ok or measured
+        return ""
+    return "both" if ok or measured else "lidar"
 
 
 #: What the run is doing during each timed phase, for the line an interrupt prints.

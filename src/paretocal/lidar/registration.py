@@ -32,11 +32,14 @@ from scipy.spatial import cKDTree
 from ..geometry import transform_points
 from .trajectory import cross_rows, se3_exp, se3_matrix
 
-__all__ = ["PairFit", "PairRegistration", "PlaneTarget", "PreparedCloud", "coarse_translation",
+__all__ = ["MIN_POINTS", "PairFit", "PairRegistration", "PlaneTarget", "PreparedCloud", "coarse_translation",
            "conditioning", "kd_tree", "neighbours", "plane_target", "prepare_cloud",
            "prepare_levels", "register_levels", "register_pair", "register_prepared",
            "voxel_for_count", "voxel_pick"]
 
+
+#: Fewest points a cloud needs to be registered.
+MIN_POINTS = 10
 
 # ----------------------------------------------------------------------------- registration
 
@@ -525,8 +528,8 @@ def prepare_cloud(xyz: np.ndarray, points: int, rng: np.random.Generator,
     ``start``: a similar sweep's voxel edge, m, to begin the search for this one's; ``name``:
     the cloud in the error a wrong shape raises)."""
     xyz = np.asarray(xyz, dtype=np.float64)
-    if xyz.ndim != 2 or xyz.shape[1] != 3 or len(xyz) < 10:
-        raise ValueError(f"{name} must have shape (N, 3) with N >= 10, got {xyz.shape}")
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or len(xyz) < MIN_POINTS:
+        raise ValueError(f"{name} must have shape (N, 3) with N >= {MIN_POINTS}, got {xyz.shape}")
     size, levels = prepare_levels(xyz, points, rng, start)
     return PreparedCloud(xyz, size, levels)
 
