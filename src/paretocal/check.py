@@ -250,8 +250,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max
-    moving = settings.decision.motion_check and len(frames) >= MIN_FRAMES
-    steps = 4 if moving else 3
+    with_motion = settings.decision.motion_check and len(frames) >= MIN_FRAMES
+    steps = 4 if with_motion else 3
     frac, gain = neighbour_fraction(obj, x0, NEIGHBOUR_STEP)
     tick("check", 1, steps)
     xo = local_optimum(obj, x0)
@@ -263,7 +263,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     quality = quality_report(obj, xo, pixel_fd_step(obj, xo))
     tick("check", 3, steps)
     motion = None
-    if moving:
+    if with_motion:
         motion = motion_agreement(recording_motion(lidar.frames, settings.search.seed), T)
         tick("check", 4, steps)
     from .pipeline import RELIABLE_MIN_FRAMES

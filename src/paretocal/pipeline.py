@@ -184,8 +184,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     kind = _motion_check(frames, settings, measured is not None, result.reliability.ok)
     if kind:
         # The recording's motion (the wide start's is reused). Both sensors' for a result
-        # nothing else casts doubt on; for one flagged already, the LiDAR's alone, a third of
-        # the time, which still tells the user when the frames show one view.
+        # nothing else casts doubt on; for one flagged already, the LiDAR's alone (about half
+        # the time), which still tells the user when the frames show one view.
         with _timed(timings, "verdict", progress):
             motion = measured or recording_motion(frames, settings.search.seed,
                                                   camera=kind == "both")

@@ -32,10 +32,10 @@ from scipy.spatial import cKDTree
 from ..geometry import transform_points
 from .trajectory import cross_rows, se3_exp, se3_matrix
 
-__all__ = ["MIN_POINTS", "PairFit", "PairRegistration", "PlaneTarget", "PreparedCloud", "coarse_translation",
-           "conditioning", "kd_tree", "neighbours", "plane_target", "prepare_cloud",
-           "prepare_levels", "register_levels", "register_pair", "register_prepared",
-           "voxel_for_count", "voxel_pick"]
+__all__ = ["MIN_POINTS", "PairFit", "PairRegistration", "PlaneTarget", "PreparedCloud",
+           "coarse_translation", "conditioning", "kd_tree", "neighbours", "plane_target",
+           "prepare_cloud", "prepare_levels", "register_levels", "register_pair",
+           "register_prepared", "voxel_for_count", "voxel_pick"]
 
 
 #: Fewest points a cloud needs to be registered.
