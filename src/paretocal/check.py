@@ -274,11 +274,9 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
                      "biases can move a correct extrinsic or hold a wrong one); check on at "
                      f"least {RELIABLE_MIN_FRAMES} frames of varied scenes")
     elif motion is not None and motion.standing:
-        notes.append(f"the rig stands still over the {len(frames)} frames (the LiDAR travels "
-                     f"{motion.travel_m:.2g} m; the view changes with about "
-                     f"{motion.need_m:.2g} m): they show the scene from one place, whose "
-                     "biases can move a correct extrinsic or hold a wrong one however many "
-                     "frames there are; check on frames taken while moving")
+        notes.append(f"{motion.one_view(len(frames))} can move a correct extrinsic or hold a "
+                     "wrong one however many frames there are; check on frames taken while "
+                     "moving")
     wrong = score > 1.0 or (motion is not None and not motion.agree)
     return CheckReport(
         verdict="miscalibrated" if wrong else "calibrated", score=float(score),

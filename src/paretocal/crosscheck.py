@@ -281,6 +281,14 @@ class MotionAgreement:
         """Not applied, or within the tolerance."""
         return not self.applied or bool(self.change_deg <= self.tolerance_deg)
 
+    def one_view(self, n_frames: int) -> str:
+        """The standing rig in words, for a verdict or a check to say what follows from it:
+        "the rig stands still over the N frames (...): they show the scene from one place,
+        whose biases"."""
+        return (f"the rig stands still over the {n_frames} frames (the LiDAR travels "
+                f"{self.travel_m:.2g} m; the view changes with about {self.need_m:.2g} m): "
+                "they show the scene from one place, whose biases")
+
     def to_dict(self) -> dict[str, Any]:
         """As ``result.json`` writes it (m, deg, s; unknown values null)."""
         def num(v: float, digits: int) -> float | None:

@@ -1415,11 +1415,8 @@ def _cross_reasons(mc: MotionAgreement | None, photo, n_frames: int) -> list[str
             "missed or were fooled out of; give a better start, or frames with structure at "
             "several distances")
     if mc is not None and mc.standing and n_frames >= RELIABLE_MIN_FRAMES:
-        reasons.append(
-            f"the rig stands still over the {n_frames} frames (the LiDAR travels "
-            f"{mc.travel_m:.2g} m; the view changes with about {mc.need_m:.2g} m): they show "
-            "the scene from one place, whose biases do not average out however many frames "
-            "there are; add frames taken at other places (while driving)")
+        reasons.append(f"{mc.one_view(n_frames)} do not average out however many frames "
+                       "there are; add frames taken at other places (while driving)")
     if mc is not None and not mc.agree:
         reasons.append(
             f"the motion disagrees: the directions of travel both sensors see put the camera's "
