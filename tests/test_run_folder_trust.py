@@ -393,6 +393,40 @@ def test_rig_runs_into_their_own_folder_and_refuse_others(capfd, tmp_path, monke
     assert len(calls) == 1
 
 
+@pytest.mark.parametrize("target", ["a run folder", "an empty folder", "nothing"])
+@pytest.mark.parametrize("joint", [False, True], ids=["per camera", "joint"])
+def test_a_rig_camera_folder_that_is_a_link_is_refused(capfd, tmp_path, monkeypatch, target,
+                                                       joint):
+    """A rig's per-camera run folder (OUT/<name>) or its joint one (OUT/joint) that is a
+    symbolic link is refused before anything is read or written, as a batch entry's runs/<id>
+    is: the run's files would go wherever the link leads (a run folder there replaced)."""
+    import paretocal.apps.rig
+    from paretocal.apps.rig import calibrate_rig
+    from .test_rig import make_rig
+
+    rig = make_rig(tmp_path)
+    monkeypatch.setattr(paretocal.apps.rig, "calibrate_run",
+                        lambda *a, **k: pytest.fail("a run started through the link"))
+    elsewhere = tmp_path / "elsewhere" / "run"
+    if target == "a run folder":
+        elsewhere.mkdir(parents=True)
+        (elsewhere / ".outputs").write_text("result.json\n")
+        (elsewhere / "result.json").write_text("mine\n")
+    elif target == "an empty folder":
+        elsewhere.mkdir(parents=True)
+    out = tmp_path / "out"
+    out.mkdir()
+    name = "joint" if joint else "left"
+    (out / name).symlink_to(elsewhere)
+    before = _snapshot(tmp_path)
+    expect = f"{out / name}: is a symbolic link, not a rig camera's run folder"
+    bad_cli(capfd, "calibrate", rig, "--out", out, "--no-figures",
+            *(["--joint"] if joint else []), expect=expect)
+    with pytest.raises(InputError, match="is a symbolic link, not a rig camera's run folder"):
+        calibrate_rig(rig, out, Settings(frames="0:2"), joint=joint)
+    assert _snapshot(tmp_path) == before
+
+
 # --- result.json comes with its own run's run_args.json ------------------------------------------
 
 def test_a_failed_rerun_keeps_the_run_args_of_the_published_run(capfd, tmp_path, raw_date,

@@ -117,6 +117,17 @@ def check_run_folder(out: Path) -> list[str]:
     return names
 
 
+def check_inner_run_folder(folder: Path, what: str) -> None:
+    """Refuse a run folder that paretocal makes inside another (a batch entry's
+    ``runs/<id>``, a rig camera's ``OUT/<name>`` or ``OUT/joint``; ``what`` names it) when
+    something else stands there: a symbolic link (the run's files would go, and a run folder
+    there be replaced, wherever it leads), a file or a special file. Absent, or a plain
+    folder, is fine. Raises :class:`InputError` (:func:`~paretocal.io.paths.not_plain`)."""
+    kind = odd_kind(Path(folder), folder=True)
+    if kind:
+        raise not_plain(Path(folder), kind, what)
+
+
 def _read_own(path: Path) -> str:
     """The text of one of the run's own small files, read without following a link. Raises
     FileNotFoundError when it is absent, :class:`InputError` when it cannot be one a run

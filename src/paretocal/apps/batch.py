@@ -344,17 +344,14 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
         (the reasons, joined), ``wall_s``, ``fingerprint`` and ``log`` (``[level, message]``
         pairs logged while the entry ran).
     """
-    from ..io.paths import not_plain, odd_kind
-    from ..rundir import check_run_folder, locked
+    from ..rundir import check_inner_run_folder, check_run_folder, locked
 
     t0 = time.perf_counter()
     run_dir = Path(out_dir) / "runs" / entry.id
     with _EntryLog(log_level) as messages:
         try:
             # The batch makes its entries' folders: one that is a link leads elsewhere.
-            kind = odd_kind(run_dir, folder=True)
-            if kind:
-                raise not_plain(run_dir, kind, "an entry's run folder")
+            check_inner_run_folder(run_dir, "an entry's run folder")
             # One writer per run folder: a task left running by an interrupted batch on a
             # remote cluster must not mix its files with the rerun's.
             with locked(run_dir):

@@ -45,11 +45,13 @@ from ..io.atomic import atomic_write_text
 from ..report.results import dumps
 from ..quality import AXES
 from ..result import CalibrationResult
-from ..rundir import calibrate_run
+from ..rundir import calibrate_run, check_inner_run_folder
 
 log = logging.getLogger(__name__)
 
 RIG_JSON = "rig.json"
+#: What a camera's (or the joint) run folder in a rig's --out is, for messages.
+RUN_FOLDER = "a rig camera's run folder"
 
 
 def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
@@ -103,6 +105,9 @@ def calibrate_rig(  # noqa: PLR0913 - dataset_options and joint are keyword-only
                             f"{', '.join(names)}")
     if cameras:
         found = [(n, s) for n, s in found if n in cameras]
+    # The rig makes its cameras' run folders: one that is a link leads the run elsewhere.
+    for name in [JOINT_RUN] if joint else [n for n, _ in found]:
+        check_inner_run_folder(out / name, RUN_FOLDER)
     t0 = time.perf_counter()
     if joint:
         return _calibrate_joint(source, out, settings, T_inits, [n for n, _ in found],

@@ -24,7 +24,8 @@ def calibrate_rig_folder(source: Path, out: Path, init, camera: str | None,  # n
     from ..errors import Interrupted
     from ..io import rig_cameras
     from ..io.atomic import check_output_dir, check_own_folder
-    from ..apps.rig import JOINT_RUN, RIG_JSON, calibrate_rig, pair_line
+    from ..apps.rig import JOINT_RUN, RIG_JSON, RUN_FOLDER, calibrate_rig, pair_line
+    from ..rundir import check_inner_run_folder
 
     cams = rig_cameras(source)
     names = [n for n, _ in cams]
@@ -45,6 +46,7 @@ def calibrate_rig_folder(source: Path, out: Path, init, camera: str | None,  # n
     if not force:       # a rig's run folder holds rig.json and a run folder per camera
         check_own_folder(out, (RIG_JSON, *names, JOINT_RUN), "rig run")
     for name in [JOINT_RUN] if joint else [camera] if camera is not None else names:
+        check_inner_run_folder(out / name, RUN_FOLDER)
         check_run_out(out / name, force)
     # --init names one camera: --camera NAME, or with --joint the first (refused above else).
     first = names[0] if joint or camera is None else camera
