@@ -1345,13 +1345,14 @@ def test_a_bag_cloud_field_with_a_huge_count_is_refused(capfd, tmp_path, raw_fra
     assert not (tmp_path / "o").exists()
 
 
-def _png_header(width: int, height: int) -> bytes:
-    """The start of a PNG of ``width`` x ``height`` grey pixels: signature and IHDR (a decoder
-    reads the size from there; the pixel data need not follow)."""
+def _png_header(width: int, height: int, depth: int = 8, colour: int = 0) -> bytes:
+    """The start of a PNG of ``width`` x ``height`` pixels of ``depth`` bits (``colour``: 0
+    grey, 6 RGBA): signature and IHDR (a decoder reads the size from there; the pixel data
+    need not follow)."""
     import struct
     import zlib
 
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    ihdr = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
     chunk = struct.pack(">I", 13) + b"IHDR" + ihdr
     return (b"\x89PNG\r\n\x1a\n" + chunk + struct.pack(">I", zlib.crc32(chunk[4:]))
             + bytes(64))
@@ -1400,6 +1401,75 @@ def test_image_header_sizes_match_the_decoder():
     assert sizes == [(53, 37), (53, 37), None, (53, 37)]
     with pytest.raises(ParetocalError, match="bag: the image header says 20000x20000 pixels"):
         compressed_image(SimpleNamespace(format="png", data=_png_header(20000, 20000)), "bag")
+
+
+def _padded(jpeg: bytes, padding: str) -> bytes:
+    """``jpeg`` with 1,100 fill bytes (0xFF, which may precede any marker) or 1,100 empty
+    comment segments after its start (SOI): legal, and both once hid the frame header from the
+    header reader, which stopped after 1,024 segments."""
+    pad = b"\xff" * 1100 if padding == "fill" else b"\xff\xfe\x00\x02" * 1100
+    return jpeg[:2] + pad + jpeg[2:]
+
+
+@pytest.mark.parametrize("padding", ["fill", "comments"])
+def test_the_jpeg_header_is_found_after_any_padding(padding):
+    """On a real JPEG padded before its frame header, the header reader agrees with the
+    decoder."""
+    from io import BytesIO
+
+    from paretocal.io.images import image_header_size
+
+    img = np.random.default_rng(2).integers(0, 255, (37, 53, 3), np.uint8)
+    data = _padded(cv2.imencode(".jpg", img)[1].tobytes(), padding)
+    assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED).shape == (37, 53, 3)
+    assert image_header_size(BytesIO(data)) == (53, 37)
+    # Cut before its frame header, a JPEG gives no size (the decoder then judges it).
+    assert image_header_size(BytesIO(data[:2 + 1100])) is None
+
+
+def _never_decoded(monkeypatch):
+    """Make any decoding fail the test: the size must be refused from the header."""
+    monkeypatch.setattr(cv2, "imdecode",
+                        lambda *a, **k: pytest.fail("decoded before the size was checked"))
+
+
+@pytest.mark.parametrize("suffix, head, expect", [
+    (".jpg", _padded(_jpeg_header(30000, 30000), "fill"),
+     "the image header says 30000x30000 pixels, more than the 268,435,456 an image may have"),
+    (".jpg", _padded(_jpeg_header(30000, 30000), "comments"),
+     "the image header says 30000x30000 pixels, more than the 268,435,456 an image may have"),
+    (".jpg", _padded(_jpeg_header(4000, 3000), "comments"),
+     "image is 4000x3000 but the calibration says 1242x375"),
+    (".png", _png_header(16384, 16384, depth=16, colour=6),
+     "image is 16384x16384 but the calibration says 1242x375"),
+], ids=["jpeg after fill bytes", "jpeg after comments", "jpeg of another size",
+        "16-bit png of another size"])
+def test_an_image_of_another_size_is_refused_from_its_header(
+        capfd, tmp_path, rig, raw_frames, monkeypatch, suffix, head, expect):
+    """The size is read from the header whatever precedes it and compared with the
+    calibration's before decoding: a JPEG whose frame header came after 1,100 fill bytes or
+    empty comments was decoded whole (5.3 GB, 8-13 s at 30000 x 30000), as was a 16384 x 16384
+    16-bit PNG (4.3 GB, 29 s) of another size than the camera's."""
+    (rig / "images" / f"{_stem(raw_frames)}.png").unlink()
+    path = rig / "images" / f"{_stem(raw_frames)}{suffix}"
+    path.write_bytes(head)
+    _never_decoded(monkeypatch)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(f"{path}: {expect}",))
+
+
+def test_a_bag_image_of_another_size_is_refused_from_its_header(monkeypatch):
+    """The same for a bag's CompressedImage (a padded 30000 x 30000 JPEG: 5.2 GB decoded),
+    against the camera's size when it is known."""
+    from paretocal.io.bags import compressed_image
+
+    _never_decoded(monkeypatch)
+    msg = SimpleNamespace(format="jpeg", data=_padded(_jpeg_header(30000, 30000), "fill"))
+    with pytest.raises(ParetocalError, match="bag: the image header says 30000x30000 pixels"):
+        compressed_image(msg, "bag")
+    msg = SimpleNamespace(format="png", data=_png_header(16384, 16384, depth=16, colour=6))
+    with pytest.raises(ParetocalError,
+                       match="^bag: image is 16384x16384 but the camera is 1242x375$"):
+        compressed_image(msg, "bag", size=(1242, 375))
 
 
 def test_a_text_file_too_large_is_refused_before_parsing(capfd, tmp_path, rig):

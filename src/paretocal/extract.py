@@ -30,6 +30,7 @@ import yaml
 
 from .errors import InputError, SettingsError, key_list
 from .io.atomic import check_output_dir
+from .io.images import check_image_size
 from .io.bags import (CAMERA_INFO, COMPRESSED_IMAGE, IMAGE, IMAGE_ENCODINGS, POINT_CLOUD2, Bag,
                       camera_from_info, cloud_array, compressed_image, image_array,
                       pair_by_stamp, stamp_ns)
@@ -318,10 +319,8 @@ def _write(bag: Bag, staging: Path, topics: tuple[str, str, str], pairing, stems
                                  f"shape {img.shape})")
             data, suffix = buf.tobytes(), ".png"
         else:
-            data, suffix, img = compressed_image(msg, where)
-        if (img.shape[1], img.shape[0]) != size:
-            raise InputError(f"{where}: the image is {img.shape[1]} x {img.shape[0]} but the "
-                             f"camera is {size[0]} x {size[1]}")
+            data, suffix, img = compressed_image(msg, where, size)
+        check_image_size(where, (img.shape[1], img.shape[0]), size, against="the camera is")
         _write_bytes(staging / "images" / f"{stem}{suffix}", data)
         done += 1
         if progress:

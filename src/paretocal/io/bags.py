@@ -19,7 +19,6 @@ any object with the message's attributes (ROS1 and ROS2 spellings: ``K``/``k``, 
 
 from __future__ import annotations
 
-import io
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -74,6 +73,8 @@ CAMERA_MODELS = {"plumb_bob": "pinhole", "rational_polynomial": "pinhole",
 
 _PNG = b"\x89PNG\r\n\x1a\n"
 _JPEG = b"\xff\xd8\xff"
+#: Where an image's expected size comes from, in messages.
+_THE_CAMERA = "the camera is"
 
 
 def is_bag(path: str | Path) -> bool:
@@ -315,10 +316,13 @@ def image_array(msg, where: str = "image") -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def compressed_image(msg, where: str = "image") -> tuple[bytes, str, np.ndarray]:
+def compressed_image(msg, where: str = "image", size: tuple[int, int] | None = None
+                     ) -> tuple[bytes, str, np.ndarray]:
     """A ``sensor_msgs/CompressedImage``: its file bytes, their suffix and the decoded image.
 
     The bytes are kept as they are (written unchanged, the image decodes to the same pixels).
+    ``size`` (width, height), the camera's: an image of another size is refused from its
+    header, before it is decoded (``where`` names the message in errors).
 
     Returns
     -------
@@ -332,8 +336,9 @@ def compressed_image(msg, where: str = "image") -> tuple[bytes, str, np.ndarray]
     Raises
     ------
     InputError
-        For another format (``compressedDepth``, video codecs; naming the ``format`` field), or
-        data that does not decode.
+        For another format (``compressedDepth``, video codecs; naming the ``format`` field),
+        data that does not decode, or an image of more pixels than an image may have or of
+        another size than ``size``.
     """
     fmt = str(getattr(msg, "format", ""))
     data = _bytes(msg.data).tobytes()
@@ -348,11 +353,12 @@ def compressed_image(msg, where: str = "image") -> tuple[bytes, str, np.ndarray]
     if suffix is None:
         raise InputError(f"{where}: compressed image format {quote(fmt)} is not supported (JPEG and "
                          "PNG are)")
-    check_image_size(where, image_header_size(io.BytesIO(data)))
+    check_image_size(where, image_header_size(data), size, against=_THE_CAMERA)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None or img.size == 0:
         raise InputError(f"{where}: cannot decode the compressed image ({quote(fmt)}, {len(data)} "
                          "bytes; corrupt or truncated)")
+    check_image_size(where, (img.shape[1], img.shape[0]), size, against=_THE_CAMERA)
     return data, suffix, img
 
 

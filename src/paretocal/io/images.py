@@ -8,6 +8,7 @@ Every failure raises :class:`~paretocal.errors.InputError` naming the file and w
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import re
@@ -78,65 +79,139 @@ def _decoder_note(texts: list[str]) -> str:
 
 
 _PNG = b"\x89PNG\r\n\x1a\n"
-#: JPEG start-of-frame markers (baseline, progressive, lossless, arithmetic): they hold the size.
-_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+#: Steps (segments and fill bytes) of a JPEG's header walked in Python before the compiled walk
+#: takes over: real files have a few dozen segments before the frame header; a file padded with
+#: millions of them (legal, and no more than a way to hide its size) is walked at C speed.
+_PYTHON_STEPS = 4096
 
 
-def image_header_size(fh) -> tuple[int, int] | None:
-    """``(width, height)`` in pixels from the header of the PNG or JPEG data in the binary
-    file object ``fh`` (read from its current position), without decoding; None for other
-    formats or a header this cannot read (the decoder then judges the data)."""
-    start = fh.tell()
-    head = fh.read(24)
-    if head[:8] == _PNG and head[12:16] == b"IHDR":
+def image_header_size(data) -> tuple[int, int] | None:
+    """``(width, height)`` in pixels from the header of PNG or JPEG ``data`` (bytes, or a
+    binary file object read from its current position), without decoding; None for other
+    formats or a header this cannot read (the decoder then judges the data).
+
+    A PNG's size is its first chunk's (IHDR). A JPEG's segments are walked from its start to
+    the frame header (SOFn), skipping fill bytes and any number of segments: the walk is
+    bounded by the data, not by a count of segments (a compiled walk past the first
+    :data:`_PYTHON_STEPS`: 64 MB of empty comment segments in about 0.1 s)."""
+    buf = np.frombuffer(data.read() if hasattr(data, "read") else data, dtype=np.uint8)
+    head = buf[:24].tobytes()
+    if head[:8] == _PNG and head[12:16] == b"IHDR" and len(head) == 24:
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     if head[:3] != b"\xff\xd8\xff":
         return None
-    pos = start + 2
-    for _ in range(1024):               # the segments before the frame header (APPn, DQT, ...)
-        fh.seek(pos)
-        seg = fh.read(9)
-        if len(seg) < 4 or seg[0] != 0xFF:
-            return None
-        marker = seg[1]
-        if marker == 0xFF or 0xD0 <= marker <= 0xD7 or marker == 0x01:
-            pos += 1 if marker == 0xFF else 2        # a fill byte, or a marker without length
-            continue
-        if marker in _JPEG_SOF:
-            h, w = int.from_bytes(seg[5:7], "big"), int.from_bytes(seg[7:9], "big")
-            return (w, h) if len(seg) == 9 and w and h else None
-        if marker in (0xD9, 0xDA):                  # end of image, or scan data: no frame size
-            return None
-        pos += 2 + int.from_bytes(seg[2:4], "big")
-    return None
+    state, a, b = _jpeg_walk(buf, 2, _PYTHON_STEPS)
+    if state == _WALKING:
+        state, a, b = _compiled_jpeg_walk()(buf, a, len(buf) + 1)
+    return (a, b) if state == _FOUND else None
 
 
-def check_image_size(where, size: tuple[int, int] | None) -> None:
-    """Refuse an image whose header (``size``: width, height from :func:`image_header_size`)
-    says more than :data:`MAX_IMAGE_PIXELS`, before it is decoded; ``where`` names it."""
-    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
-        raise InputError(f"{where}: the image header says {size[0]}x{size[1]} pixels, more than "
+_FOUND, _NO_FRAME, _WALKING = 0, 1, 2
+
+
+def _jpeg_walk(buf: np.ndarray, pos: int, steps: int) -> tuple[int, int, int]:
+    """Walk the JPEG segments of ``buf`` (uint8) from ``pos`` to the frame header, at most
+    ``steps`` segments and fill bytes: ``(_FOUND, width, height)``, ``(_NO_FRAME, 0, 0)``
+    (no frame header before the scan data, the end, or something that is no segment), or
+    ``(_WALKING, pos, 0)`` to go on from ``pos``. Plain Python over an array, so that numba
+    compiles it unchanged (:func:`_compiled_jpeg_walk`)."""
+    end = len(buf)
+    while steps > 0:
+        steps -= 1
+        if pos >= end or buf[pos] != 0xFF:
+            return _NO_FRAME, 0, 0
+        pos += 1
+        if pos < end and buf[pos] == 0xFF:
+            continue                               # a fill byte: any marker may follow them
+        if pos >= end:
+            return _NO_FRAME, 0, 0
+        marker = int(buf[pos])
+        pos += 1
+        if marker == 0x01 or 0xD0 <= marker <= 0xD7:
+            continue                               # TEM, RSTn: no length
+        if marker == 0x00 or 0xD8 <= marker <= 0xDA:
+            return _NO_FRAME, 0, 0                 # a stuffed byte, SOI, EOI, SOS: no frame
+        if 0xC0 <= marker <= 0xCF and marker != 0xC4 and marker != 0xC8 and marker != 0xCC:
+            if pos + 7 > end:                      # SOFn: length, precision, height, width
+                return _NO_FRAME, 0, 0
+            h = int(buf[pos + 3]) * 256 + int(buf[pos + 4])
+            w = int(buf[pos + 5]) * 256 + int(buf[pos + 6])
+            return (_FOUND, w, h) if w > 0 and h > 0 else (_NO_FRAME, 0, 0)
+        if pos + 2 > end:
+            return _NO_FRAME, 0, 0
+        length = int(buf[pos]) * 256 + int(buf[pos + 1])
+        if length < 2:
+            return _NO_FRAME, 0, 0
+        pos += length
+    return _WALKING, pos, 0
+
+
+@functools.cache
+def _compiled_jpeg_walk():
+    """:func:`_jpeg_walk` compiled (numba, cached on disk), for the rare file that needs it."""
+    from numba import njit
+
+    return njit(cache=True)(_jpeg_walk)
+
+
+def check_image_size(where, size: tuple[int, int] | None,
+                     expected: tuple[int, int] | None = None, what: str = "image",
+                     against: str = "the calibration says") -> None:
+    """Refuse an image whose header (``size``: width, height from :func:`image_header_size`,
+    None when it gives none) says more than :data:`MAX_IMAGE_PIXELS`, or another size than
+    ``expected`` (width, height: the camera's), before it is decoded; or check a decoded
+    image's size the same way. ``where`` names it, ``what`` it is (``"image"``, ``"mask"``),
+    ``against`` where ``expected`` comes from."""
+    if size is None:
+        return
+    w, h = size
+    if w * h > MAX_IMAGE_PIXELS:
+        raise InputError(f"{where}: the image header says {w}x{h} pixels, more than "
                          f"the {MAX_IMAGE_PIXELS:,} an image may have")
+    if expected is not None and (w, h) != tuple(expected):
+        raise InputError(f"{where}: {what} is {w}x{h} but {against} "
+                         f"{expected[0]}x{expected[1]}")
 
 
-def decode_image(path: Path) -> np.ndarray:
-    """The image at ``path`` as OpenCV decodes it (any depth and channel count).
+def image_size(path: Path) -> tuple[int, int]:
+    """``(width, height)`` of the image at ``path``: from its header (PNG, JPEG), else as
+    decoded. Raises :class:`InputError` as :func:`decode_image` does."""
+    raw = _read_raw(Path(path))
+    size = image_header_size(raw)
+    if size is None:
+        img = decode_image(path)
+        return img.shape[1], img.shape[0]
+    check_image_size(path, size)
+    return size
 
-    Raises :class:`InputError` naming the file when it is missing, unreadable, empty (0 bytes)
-    or cannot be decoded; what the decoder printed is put in the message, not on stderr.
-    """
-    path = Path(path)
+
+def _read_raw(path: Path) -> np.ndarray:
+    """The bytes of the image file ``path`` (at most :data:`MAX_IMAGE_BYTES`)."""
     require_file(path, "image file")
     try:
         require_size(path, MAX_IMAGE_BYTES, "image file")
-        with open(path, "rb") as fh:
-            check_image_size(path, image_header_size(fh))
-            fh.seek(0)
-            raw = np.fromfile(fh, dtype=np.uint8)
+        raw = np.fromfile(path, dtype=np.uint8)
     except OSError as exc:
         raise InputError(f"{path}: cannot read the image ({exc.strerror or exc})") from None
     if raw.size == 0:
         raise InputError(f"{path}: the image file is empty (0 bytes)")
+    return raw
+
+
+def decode_image(path: Path, expected: tuple[int, int] | None = None,
+                 what: str = "image") -> np.ndarray:
+    """The image at ``path`` as OpenCV decodes it (any depth and channel count).
+
+    ``expected`` (width, height), the camera's size: an image of another size is refused
+    (naming ``what`` it is) before it is decoded when its header says so, else once decoded.
+
+    Raises :class:`InputError` naming the file when it is missing, unreadable, empty (0 bytes),
+    of another size or cannot be decoded; what the decoder printed is put in the message, not
+    on stderr.
+    """
+    path = Path(path)
+    raw = _read_raw(path)
+    check_image_size(path, image_header_size(raw.data), expected, what)
     notes: list[str] = []
     with _native_stderr(notes):
         try:
@@ -148,6 +223,7 @@ def decode_image(path: Path) -> np.ndarray:
                          f"image{_decoder_note(notes)})")
     if _decoder_note(notes):
         log.warning("%s: the image decoder reported a problem%s", path, _decoder_note(notes))
+    check_image_size(path, (img.shape[1], img.shape[0]), expected, what)
     return img
 
 
@@ -177,9 +253,10 @@ def _to_8bit(img: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(scaled), 0, 255).astype(np.uint8)
 
 
-def read_image(path: Path) -> np.ndarray:
-    """Read an image as (H, W, 3) uint8 BGR; grey images are expanded to three channels."""
-    img = decode_image(Path(path))
+def read_image(path: Path, expected: tuple[int, int] | None = None) -> np.ndarray:
+    """Read an image as (H, W, 3) uint8 BGR; grey images are expanded to three channels.
+    ``expected`` (width, height): the camera's size, checked as :func:`decode_image` does."""
+    img = decode_image(Path(path), expected)
     if img.dtype != np.uint8:
         img = _to_8bit(img)
     if img.ndim == 2:

@@ -22,7 +22,7 @@ from .bags import extract_hint, is_bag
 from .frame import Frame
 from .paths import kind_of, missing, not_found
 from .clouds import BIN_LAYOUTS, POINT_SUFFIXES, read_cloud
-from .images import decode_image, IMAGE_SUFFIXES, read_image
+from .images import decode_image, IMAGE_SUFFIXES, image_size, read_image
 from .text import calib_matrix, read_kitti_calib, read_mapping
 
 log = logging.getLogger(__name__)
@@ -188,16 +188,12 @@ def _kitti_object(root: Path, camera_index: int) -> Source:
         R0 = calib_matrix(calib, "R0_rect", (3, 3), cpath)
         Tr = np.vstack([calib_matrix(calib, "Tr_velo_to_cam", (3, 4), cpath), [0, 0, 0, 1]])
         # The object benchmark's calib files carry no image size: read it from the image header.
-        shape = _image_shape(img)
-        cam, B = _camera_from_P(P, shape[1], shape[0])
+        width, height = image_size(img)
+        cam, B = _camera_from_P(P, width, height)
         rect = B @ _rect4(R0)
         frames.append(FrameFiles(stem, img, pts, cam, check_rigid(rect @ Tr, str(cpath)),
                                  kitti_rect=rect, credit=KITTI_CREDIT))
     return Source("kitti_object", root, frames)
-
-
-def _image_shape(path: Path) -> tuple[int, int]:
-    return decode_image(path).shape[:2]
 
 
 #: Camera model names of calib.yaml (``camera.model``) and of ROS camera_info
@@ -461,10 +457,7 @@ def _folder_mask(root: Path, cpath: Path, data: dict, camera: Camera) -> np.ndar
     mpath = root / ref
     if kind_of(mpath) != "a regular file":
         raise InputError(f"{cpath}: {key} file {excerpt(mpath, PATH_CHARS)} {missing(mpath)}")
-    img = decode_image(mpath)
-    if img.shape[:2] != (camera.height, camera.width):
-        raise InputError(f"{mpath}: mask is {img.shape[1]}x{img.shape[0]} but the calibration "
-                         f"says {camera.width}x{camera.height}")
+    img = decode_image(mpath, (camera.width, camera.height), "mask")
     usable = img != 0 if img.ndim == 2 else np.any(img != 0, axis=2)
     if not usable.any():
         raise InputError(f"{mpath}: the mask has no usable (nonzero) pixel")
@@ -795,11 +788,8 @@ def read_frame(files: FrameFiles, clouds: dict | None = None) -> Frame:
     from points path to cloud, is a cache shared by the cameras of a rig: each cloud is read
     once.
     """
-    image = read_image(files.image_path)
     cam = files.camera
-    if image.shape[1] != cam.width or image.shape[0] != cam.height:
-        raise InputError(f"{files.image_path}: image is {image.shape[1]}x{image.shape[0]} but the "
-                         f"calibration says {cam.width}x{cam.height}")
+    image = read_image(files.image_path, (cam.width, cam.height))
     mask = frame_mask(cam, files.mask)
     key = (files.points_path, files.bin_layout)
     cloud = clouds.get(key) if clouds is not None else None
