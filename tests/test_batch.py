@@ -295,6 +295,8 @@ BAD_MANIFESTS = {
     "csv row too long": ("m.csv", b"id,source\na,x,extra\n",
                          "line 2: 2 columns in the header, more values in this row"),
     "csv header only": ("m.csv", b"id,source\n", "the manifest lists no entries"),
+    "nested 100,000 deep": ("m.yaml", b"[" * 100_000 + b"]" * 100_000,
+                            "its values are nested too deeply to be read"),
 }
 
 
@@ -339,3 +341,12 @@ def test_batch_without_the_fleet_extra_says_how_to_install_it(tmp_path, capsys, 
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["paretocal: error: paretocal batch needs distributed: install the fleet "
                    "extra, pip install 'paretocal[fleet]'"]
+
+
+def test_an_entry_record_nested_too_deeply_is_no_record(tmp_path):
+    """A runs/<id>/entry.json nested 100,000 deep (RecursionError, which aborted the whole
+    batch) reads as no record: the entry is calibrated again."""
+    from paretocal.apps.batch import RECORD, read_record
+
+    (tmp_path / RECORD).write_text("[" * 100_000 + "]" * 100_000)
+    assert read_record(tmp_path) is None

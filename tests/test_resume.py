@@ -383,6 +383,20 @@ def test_the_budget_decision_does_not_follow_the_load(tmp_path, start, monkeypat
     assert loaded.cost_model.ms_per_point == 3e-5 and loaded.n_points < first.n_points
 
 
+def test_a_cost_model_cache_nested_too_deeply_is_measured_again(tmp_path, start, monkeypatch):
+    """A cache file nested 100,000 deep failed every later run of the scene (RecursionError,
+    exit 1) until it was deleted; now it is measured again and the file replaced."""
+    frames, T = start
+    monkeypatch.setenv("PARETOCAL_CACHE_DIR", str(tmp_path / "cache"))
+    _timing(monkeypatch, 1e-5)
+    calibrate(frames, T, BUDGET)
+    (cache,) = (tmp_path / "cache").glob("cost-*.json")
+    cache.write_text("[" * 100_000 + "]" * 100_000)
+    again = calibrate(frames, T, BUDGET)
+    assert again.cost_model.probe["source"] == "measured"
+    assert json.loads(cache.read_text())["ms_per_point"] == 1e-5
+
+
 def test_a_resumed_run_decides_with_the_interrupted_runs_cost_model(tmp_path, start,
                                                                     monkeypatch):
     frames, T = start

@@ -324,6 +324,38 @@ def test_malformed_run_arguments_are_refused_naming_the_field(capfd, tmp_path, r
     assert _snapshot(tmp_path) == before
 
 
+#: JSON (and YAML) nested 100,000 deep: Python's readers raise RecursionError on it.
+DEEP = "[" * 100_000 + "]" * 100_000
+
+
+@pytest.mark.parametrize("where", ["ARGS", "run_args.json", "checkpoint meta",
+                                   "a rig camera's run_args.json"])
+def test_run_files_nested_too_deeply_are_refused_in_one_line(capfd, tmp_path, stopped_run,
+                                                             done_run, where):
+    """A run's arguments or its checkpoint's metadata nested 100,000 deep ended the resume with
+    exit 1 (RecursionError); now one line naming the file, nothing touched."""
+    if where == "checkpoint meta":
+        run = _copy(stopped_run, tmp_path)
+        with np.load(run / "checkpoint.npz", allow_pickle=False) as z:
+            arrays = {k: np.array(z[k]) for k in z.files if k != "meta"}
+        np.savez(run / "checkpoint.npz", meta=np.array(DEEP), **arrays)
+        bad, expect = run / "checkpoint.npz", "its values are nested too deeply to be read"
+    elif where == "a rig camera's run_args.json":
+        run = tmp_path / "rig_out"
+        _copy(done_run, run)
+        (run / "run" / "run_args.json").write_text(DEEP)
+        bad, expect = run, "no run_args.json here; not a run directory"
+    else:
+        run = _copy(stopped_run if where == "ARGS" else done_run, tmp_path)
+        name = ARGS if where == "ARGS" else "run_args.json"
+        assert (run / name).exists()
+        (run / name).write_text(DEEP)
+        bad, expect = run / name, "its values are nested too deeply to be read"
+    before = _snapshot(tmp_path)
+    bad_cli(capfd, "calibrate", "--resume", run, expect=(f"{bad}: {expect}",))
+    assert _snapshot(tmp_path) == before
+
+
 # --- a folder of other files is not a run folder -------------------------------------------------
 
 def test_a_folder_of_other_files_is_refused_unless_forced(capfd, tmp_path, raw_date):

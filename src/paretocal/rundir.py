@@ -50,6 +50,7 @@ from .io import load_frames, rig_source, source_options
 from .io.atomic import atomic_write_text, temporary_pattern
 from .io.frame import Frame
 from .io.paths import not_plain, odd_kind, open_plain
+from .io.text import load_json
 from .pipeline import calibrate
 from .report.results import partial_front_csv, write_run
 from .result import CalibrationResult
@@ -397,10 +398,7 @@ def run_arguments(run_dir: str | Path) -> dict:
         raise ParetocalError(f"{run_dir}: no {RUN_ARGS} here; not a run directory of paretocal "
                              "calibrate (or its run stopped before the first checkpoint, or "
                              "ran with --checkpoint-every 0)")
-    try:
-        args = json.loads(_read_own(path))
-    except ValueError as exc:
-        raise InputError(f"{path}: malformed ({type(exc).__name__}: {exc})") from None
+    args = load_json(_read_own(path), path)
     if not isinstance(args, dict):
         raise InputError(f"{path}: malformed: not a mapping of the run's arguments")
 
@@ -437,9 +435,9 @@ def _rig_camera_of(run_args: Path) -> str | None:
     (a single-camera run, or a file that cannot be read: the caller then reports the folder
     as it is)."""
     try:
-        args = json.loads(_read_own(run_args))
+        args = load_json(_read_own(run_args), run_args)
         found, joint = args.get("rig_camera"), args.get("joint")
-    except (OSError, ValueError, AttributeError, ParetocalError):
+    except (OSError, AttributeError, ParetocalError):
         return None
     if isinstance(joint, list) and all(isinstance(n, str) for n in joint):
         return ", ".join(joint)

@@ -12,13 +12,14 @@ from pathlib import Path
 import numpy as np
 
 from .config import ObjectiveSettings, SearchSettings, Settings
-from .errors import DegenerateSceneError, SettingsError
+from .errors import DegenerateSceneError, ParetocalError, SettingsError
 from .features.lidar import GROUP_NAMES
 from .features.prepare import FrameFeatures, prepare_frame
 from .lidar.rings import Rings
 from .inputs import RingBrief, joint_camera
 from .io.atomic import atomic_write_text
 from .io.frame import Frame
+from .io.text import load_json
 from .objective import CalibrationObjective, build_scene, get_evaluator, measure_cost_model
 from .objective.cost import CostModel
 from .search.checkpoint import fingerprint
@@ -236,9 +237,9 @@ def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int
     path = folder / f"cost-{key[:20]}.json" if folder is not None else None
     if path is not None and path.is_file():
         try:
-            line = CostModel(**json.loads(path.read_text(encoding="utf-8")))
+            line = CostModel(**load_json(path.read_text(encoding="utf-8"), path))
             return line.for_scene(scene, n_min, n_max, source=f"cache {path}")
-        except (OSError, ValueError, TypeError) as exc:
+        except (OSError, ValueError, TypeError, ParetocalError) as exc:
             log.info("%s: unreadable cost model (%s); measuring again", path, exc)
     cost = measure_cost_model(scene, evaluate, T_view, n_min, n_max)
     if cost.ms_per_point <= 1e-9:

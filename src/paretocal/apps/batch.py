@@ -221,9 +221,12 @@ def _field(where: str, key: str, value) -> str | int:
 
 def read_record(run_dir: Path) -> dict | None:
     """The entry's record, or None when it has none (or an unreadable one)."""
+    from ..io.text import load_json
+
+    path = Path(run_dir) / RECORD
     try:
-        record = json.loads((Path(run_dir) / RECORD).read_text())
-    except (OSError, ValueError):
+        record = load_json(path.read_text(encoding="utf-8"), path)
+    except (OSError, ValueError, ParetocalError):           # ValueError: not UTF-8
         return None
     return record if isinstance(record, dict) else None
 

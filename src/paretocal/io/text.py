@@ -1,5 +1,6 @@
-"""Reading text inputs: KITTI calibration files and YAML (calib.yaml, camera_info, settings,
---init files, batch manifests), with their size, aliases and duplicate keys bounded.
+"""Reading text inputs: KITTI calibration files, YAML (calib.yaml, camera_info, settings,
+--init files, batch manifests) and JSON (inputs, and the files paretocal reads back), with
+their size, aliases, nesting and duplicate keys bounded.
 
 Every failure raises :class:`~paretocal.errors.InputError` naming the file and what is wrong.
 """
@@ -152,32 +153,63 @@ def _unique_pairs(pairs: list) -> dict:
     return dict(pairs)
 
 
+#: Why a file nested too deeply is refused. Python's JSON and YAML readers recurse once (or a
+#: few times) per level and raise RecursionError some hundreds of levels down; the files
+#: paretocal reads nest a few levels.
+_TOO_DEEP = ("its values are nested too deeply to be read (lists or mappings hundreds of "
+             "levels deep; the files paretocal reads nest a few)")
+
+
+def _check_length(text: str, path: Path | str) -> None:
+    if len(text) > MAX_TEXT_BYTES:
+        raise InputError(f"{path}: {len(text):,} characters, more than the "
+                         f"{mib(MAX_TEXT_BYTES)} a {_TEXT} may hold")
+
+
 def load_yaml(text: str, path: Path | str):
     """``yaml.safe_load`` of ``text`` that refuses what would be read wrongly or slowly,
     naming ``path``.
 
     :class:`InputError` is raised, before anything is built, for text longer than
     :data:`MAX_TEXT_BYTES` or anchors and aliases that expand beyond :data:`MAX_YAML_VALUES`
-    values (or refer to themselves); and for a mapping that holds a key twice (at any depth).
+    values (or refer to themselves); and for a mapping that holds a key twice (at any depth)
+    or values nested too deeply to read (hundreds of levels).
     YAML syntax errors propagate as :class:`yaml.YAMLError` (:func:`yaml_error` words them).
     """
-    if len(text) > MAX_TEXT_BYTES:
-        raise InputError(f"{path}: {len(text):,} characters, more than the "
-                         f"{mib(MAX_TEXT_BYTES)} a {_TEXT} may hold")
+    _check_length(text, path)
     loader = _UniqueKeyLoader(text)
     try:
         node = loader.get_single_node()
         if node is None:
             return None
-        try:
-            _expanded_size(node, {}, set())
-            return loader.construct_document(node)
-        except _AliasBomb as exc:
-            raise InputError(f"{path}: {exc}") from None
-        except _DuplicateKey as exc:
-            raise exc.error(path) from None
+        _expanded_size(node, {}, set())
+        return loader.construct_document(node)
+    except _AliasBomb as exc:
+        raise InputError(f"{path}: {exc}") from None
+    except _DuplicateKey as exc:
+        raise exc.error(path) from None
+    except RecursionError:
+        raise InputError(f"{path}: {_TOO_DEEP}") from None
     finally:
         loader.dispose()
+
+
+def load_json(text: str, path: Path | str):
+    """``json.loads`` of ``text`` that refuses what would be read wrongly or not at all,
+    naming ``path``: :class:`InputError` for text longer than :data:`MAX_TEXT_BYTES`, a
+    mapping that holds a key twice (at any depth), values nested too deeply to read
+    (hundreds of levels) and text that is not JSON. The one reader of every JSON file
+    paretocal reads back (a run's arguments, a checkpoint's metadata, a batch entry's
+    record, the cost-model cache) and of JSON inputs."""
+    _check_length(text, path)
+    try:
+        return json.loads(text, object_pairs_hook=_unique_pairs)
+    except _DuplicateKey as exc:
+        raise exc.error(path) from None
+    except RecursionError:
+        raise InputError(f"{path}: {_TOO_DEEP}") from None
+    except ValueError as exc:
+        raise InputError(f"{path}: not valid JSON ({first_line(exc)})") from None
 
 
 def yaml_error(path: Path | str, exc: yaml.YAMLError) -> InputError:
@@ -202,16 +234,15 @@ def read_mapping(path: Path) -> dict:
         raise InputError(f"{path}: not a text file (not UTF-8); expected YAML or JSON") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
-    try:
-        data = (json.loads(text, object_pairs_hook=_unique_pairs) if kind == "JSON"
-                else load_yaml(text, path))
-    except _DuplicateKey as exc:
-        raise exc.error(path) from None
-    except yaml.MarkedYAMLError as exc:
-        raise yaml_error(path, exc) from None
-    except (ValueError, yaml.YAMLError, RecursionError) as exc:
-        raise InputError(f"{path}: not valid {kind} ({first_line(exc)})") from None
+    if path.suffix.lower() == ".json":
+        data = load_json(text, path)
+    else:
+        try:
+            data = load_yaml(text, path)
+        except yaml.YAMLError as exc:
+            raise yaml_error(path, exc) from None
+        except ValueError as exc:              # a value PyYAML cannot construct
+            raise InputError(f"{path}: not valid YAML ({first_line(exc)})") from None
     if not isinstance(data, dict):
         got = "an empty file" if data is None else f"a {type(data).__name__}"
         raise InputError(f"{path}: expected a mapping (key: value) at the top level, got {got}")

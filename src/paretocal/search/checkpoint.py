@@ -32,6 +32,7 @@ import numpy as np
 from ..errors import InputError, Interrupted
 from ..io.atomic import atomic_path
 from ..io.paths import open_plain
+from ..io.text import load_json
 
 FORMAT = 2
 ARRAYS = ("X", "F", "rank", "crowding")
@@ -92,8 +93,9 @@ class Checkpoint:
         try:
             with open_plain(Path(self.path), "a checkpoint file") as fh, \
                     np.load(fh, allow_pickle=False) as z:
-                found = json.loads(str(z["meta"])).get("cost_model")
-        except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile):
+                found = load_json(str(z["meta"]), self.path).get("cost_model")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile,
+                InputError):
             return None
         if found is not None:
             _check_cost_model(self.path, found)
@@ -128,7 +130,7 @@ class Checkpoint:
         try:
             with open_plain(path, "a checkpoint file") as fh, \
                     np.load(fh, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
+                meta = load_json(str(z["meta"]), path)
                 arrays = {k: np.array(z[k]) for k in ARRAYS}
         except FileNotFoundError:
             return None
