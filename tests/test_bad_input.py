@@ -1287,6 +1287,40 @@ def test_an_npy_header_claiming_too_much_is_refused_before_reading(capfd, tmp_pa
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(str(path), expect))
 
 
+def _npy_raw_header(text: str, version: int = 1) -> bytes:
+    """A .npy file whose header is ``text`` as it stands (no check that it parses), followed by
+    64 bytes of data; ``version`` 1 (a 2-byte length) or 3 (4 bytes, UTF-8)."""
+    body = text.encode("utf-8")
+    body += b" " * (-(len(body) + 7 + 2 * version) % 64) + b"\n"
+    size = len(body).to_bytes(2 if version == 1 else 4, "little")
+    return b"\x93NUMPY" + bytes([version, 0]) + size + body + b"\0" * 64
+
+
+def _nested_shape(minuses: int) -> str:
+    return ("{'descr': '<f8', 'fortran_order': False, 'shape': (" + "-" * minuses
+            + "5, 4), }")
+
+
+@pytest.mark.parametrize("content, expect", [
+    (_npy_raw_header(_nested_shape(5_000)), "unreadable .npy header (its shape is nested too "
+                                            "deeply to be read)"),
+    (_npy_raw_header(_nested_shape(9_000)), "unreadable .npy header (its shape is nested too "
+                                            "deeply to be read)"),
+    (_npy_raw_header(_nested_shape(1_000_000), version=3),
+     "a .npy header of 1,000,116 bytes, more than the 10,000 numpy writes and reads"),
+    (_npy_raw_header("{'descr': '<f8', 'fortran_order': False, 'shape': (-5, 4), }"),
+     "unreadable .npy header (shape (-5, 4) is not a tuple of sizes)"),
+], ids=["5,000 minuses", "9,000 minuses", "1 MB v3.0 header", "negative size"])
+def test_an_npy_header_that_cannot_be_a_header_is_refused(capfd, tmp_path, rig, raw_frames,
+                                                          content, expect):
+    """A .npy header whose shape is an expression nested thousands deep (exit 1 before:
+    RecursionError, MemoryError), or a header longer than numpy itself reads (1 MB)."""
+    (rig / "points" / f"{_stem(raw_frames)}.bin").unlink()
+    path = rig / "points" / f"{_stem(raw_frames)}.npy"
+    path.write_bytes(content)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", *FAST, expect=(f"{path}: {expect}",))
+
+
 def _pcd(header: str, data: bytes = b"") -> bytes:
     return ("VERSION 0.7\n" + header + "VIEWPOINT 0 0 0 1 0 0 0\n").encode() + data
 

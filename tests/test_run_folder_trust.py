@@ -295,6 +295,49 @@ def test_a_tampered_checkpoint_is_refused_naming_the_field(capfd, tmp_path, stop
     assert _snapshot(tmp_path) == before
 
 
+def _member(path, name: str, content: bytes) -> None:
+    """Replace the member ``name`` (``X.npy``) of the .npz ``path`` by ``content``."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        members = {i.filename: z.read(i) for i in z.infolist()}
+    members[name] = content
+    with zipfile.ZipFile(path, "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+
+
+def _npy_bytes(header: dict | str, data: bytes = b"\0" * 64) -> bytes:
+    import io
+
+    if isinstance(header, str):
+        body = header.encode() + b" " * (-(len(header) + 11) % 64) + b"\n"
+        return b"\x93NUMPY\x01\x00" + len(body).to_bytes(2, "little") + body + data
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, header)
+    return buf.getvalue() + data
+
+
+@pytest.mark.parametrize("content, expect", [
+    (_npy_bytes({"descr": "<f8", "fortran_order": False, "shape": (10 ** 12, 7)}),
+     "member X.npy: the .npy header says shape (1000000000000, 7) of float64 "
+     "(56,000,000,000,000 bytes), but 64 bytes of data follow"),
+    (_npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (" + "-" * 5000 + "5, 7), }"),
+     "member X.npy: unreadable .npy header (its shape is nested too deeply to be read)"),
+], ids=["claims 10^12 x 7", "nested shape"])
+def test_a_checkpoint_member_is_read_by_the_safe_npy_reader(capfd, tmp_path, stopped_run,
+                                                            content, expect):
+    """A checkpoint's member claiming shape (10^12, 7) made numpy reserve 50.9 TiB, one with a
+    shape nested 5,000 deep raised RecursionError (exit 1 both); they are read as a cloud's
+    .npy is, and refused naming the member."""
+    run = _copy(stopped_run, tmp_path)
+    _member(run / "checkpoint.npz", "X.npy", content)
+    before = _snapshot(tmp_path)
+    bad_cli(capfd, "calibrate", "--resume", run,
+            expect=(f"{run / 'checkpoint.npz'}: unreadable checkpoint, {expect}",))
+    assert _snapshot(tmp_path) == before
+
+
 # --- the recorded arguments are checked field by field -------------------------------------------
 
 @pytest.mark.parametrize("field, value, expect", [

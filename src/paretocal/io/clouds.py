@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import io
 import logging
+import math
 import os
 import re
 import warnings
@@ -48,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, excerpt, first_line, is_name, key_list, quote
+from .arrays import npy_data, npy_header
 from .paths import mib, require_file, require_size
 
 log = logging.getLogger(__name__)
@@ -473,8 +475,7 @@ def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
 
 def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], str | None]:
     """The columns of a ``.npy`` file: a record array's fields or a plain array's columns."""
-    _npy_header(path)
-    arr = np.load(path, allow_pickle=False)
+    arr = _load_npy(path)
     if arr.dtype.names:
         if arr.ndim == 0:
             raise InputError(f"{path}: the record array holds a single record, not a cloud")
@@ -513,52 +514,20 @@ def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], 
     return {n: arr[:, j] for j, n in enumerate(names)}, declared
 
 
-def _npy_header_3_0(fh) -> tuple[tuple[int, ...], np.dtype]:
-    """The shape and dtype of a version 3.0 ``.npy`` header (2.0's layout with UTF-8 text,
-    which numpy writes when a field name is not Latin-1; numpy has no public reader for it)."""
-    import ast
-    import struct
-
-    (size,) = struct.unpack("<I", fh.read(4))
-    header = ast.literal_eval(fh.read(size).decode("utf-8"))
-    if not isinstance(header, dict) or not isinstance(header.get("shape"), tuple):
-        raise ValueError("the header is not a dictionary with a shape")
-    return header["shape"], np.lib.format.descr_to_dtype(header["descr"])
-
-
-def _npy_header(path: Path) -> None:
-    """Check what a ``.npy`` header claims before numpy allocates it: the points (records, or
-    rows of a plain array) within :data:`MAX_CLOUD_POINTS`, and the data within the file (a
-    header saying (10**12, 4) must not make numpy reserve 29 TiB)."""
-    fmt = np.lib.format
+def _load_npy(path: Path) -> np.ndarray:
+    """The array of a ``.npy`` file, read by the safe reader (:mod:`paretocal.io.arrays`),
+    what its header claims checked before numpy allocates it: the points (records, or rows of
+    a plain array) within :data:`MAX_CLOUD_POINTS`, and the data within the file (a header
+    saying (10**12, 4) must not make numpy reserve 29 TiB)."""
     with open(path, "rb") as fh:
-        if fh.read(6) != b"\x93NUMPY":
-            raise InputError(f"{path}: not a NumPy .npy file (no .npy header)")
-        fh.seek(0)
-        try:
-            version = fmt.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = fmt.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, _, dtype = fmt.read_array_header_2_0(fh)
-            elif version == (3, 0):
-                shape, dtype = _npy_header_3_0(fh)
-            else:
-                raise InputError(f"{path}: .npy format version {version[0]}.{version[1]} is "
-                                 "not one numpy writes (1.0, 2.0 or 3.0)")
-        except (ValueError, SyntaxError, KeyError, TypeError) as exc:
-            raise InputError(f"{path}: unreadable .npy header ({exc})") from None
+        shape, fortran, dtype = npy_header(fh, str(path))
         have = os.fstat(fh.fileno()).st_size - fh.tell()
-    if dtype.hasobject:
-        return                                  # np.load refuses objects (allow_pickle=False)
-    count = int(np.prod(shape, dtype=object))
-    rows = count if dtype.names or len(shape) < 2 else count // max(shape[-1], 1)
-    need = count * dtype.itemsize
-    _check_points(path, rows, need, f"its header (shape {shape}, {dtype})")
-    if need > have:
-        raise InputError(f"{path}: the .npy header says shape {shape} of {dtype} ({need:,} "
-                         f"bytes), but {have:,} bytes of data follow; the file is truncated or "
-                         "its header is wrong")
+        if not dtype.hasobject:                 # refused by npy_data, naming what it holds
+            count = math.prod(shape)
+            rows = count if dtype.names or len(shape) < 2 else count // max(shape[-1], 1)
+            _check_points(path, rows, count * dtype.itemsize,
+                          f"its header (shape {shape}, {dtype})")
+        return npy_data(fh, str(path), shape, fortran, dtype, have)
 
 
 def _loadtxt(body: bytes, **kw) -> np.ndarray:

@@ -7,8 +7,9 @@ from a checkpoint whose fingerprint matches continues the same random stream, so
 bitwise the one an uninterrupted run gives; a checkpoint of another run is refused.
 
 The file is a numpy ``.npz`` archive of plain arrays plus one JSON text (format, fingerprint,
-generation, evaluations, the Generator's state, the history), read with
-``allow_pickle=False``: loading a checkpoint cannot run code, whoever wrote the file. Nor can
+generation, evaluations, the Generator's state, the history), read by the safe ``.npz`` reader
+(:mod:`paretocal.io.arrays`: no unpickling, no header trusted): loading a checkpoint cannot
+run code or allocate what its headers claim, whoever wrote the file. Nor can
 it steer the search: every field is checked against the run's settings (generation, counts,
 shapes, the search box, the generator's state, the history) before the search continues, and
 the file is never read through a symbolic link.
@@ -31,6 +32,7 @@ import numpy as np
 
 from ..errors import InputError, Interrupted
 from ..io.atomic import atomic_path
+from ..io.arrays import load_npz
 from ..io.paths import open_plain
 from ..io.text import load_json
 
@@ -91,9 +93,7 @@ class Checkpoint:
         by :meth:`load`, not here; a cost model of the wrong form raises :class:`InputError`
         naming the file."""
         try:
-            with open_plain(Path(self.path), "a checkpoint file") as fh, \
-                    np.load(fh, allow_pickle=False) as z:
-                found = load_json(str(z["meta"]), self.path).get("cost_model")
+            found = _read(Path(self.path))[0].get("cost_model")
         except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile,
                 InputError):
             return None
@@ -128,10 +128,7 @@ class Checkpoint:
         unreadable = (OSError, ValueError, KeyError, TypeError, AttributeError,
                       zipfile.BadZipFile)
         try:
-            with open_plain(path, "a checkpoint file") as fh, \
-                    np.load(fh, allow_pickle=False) as z:
-                meta = load_json(str(z["meta"]), path)
-                arrays = {k: np.array(z[k]) for k in ARRAYS}
+            meta, arrays = _read(path)
         except FileNotFoundError:
             return None
         except unreadable as exc:
@@ -148,6 +145,16 @@ class Checkpoint:
         state = EngineState(rng=np.random.Generator(bit_gen), generation=meta["generation"],
                           evaluations=meta["evaluations"], **arrays)
         return state, meta["history"]
+
+
+def _read(path: Path) -> tuple:
+    """``(meta, arrays)`` of the checkpoint file ``path``: its metadata (JSON) and the arrays
+    of :data:`ARRAYS`, read without following a link, by the safe ``.npz`` reader (a member's
+    header is not trusted, nothing in it is unpickled)."""
+    with open_plain(path, "a checkpoint file") as fh:
+        members = load_npz(fh, f"{path}: unreadable checkpoint")
+    meta = load_json(str(members["meta"]), path)
+    return meta, {k: members[k] for k in ARRAYS}
 
 
 class _Bad(Exception):
