@@ -256,6 +256,9 @@ def test_image_size_disagrees_with_calib_yaml(capfd, tmp_path, rig, raw_frames):
      "camera.xi must be a finite number >= 0, got -0.5"),
     (lambda c: c["camera"].update(model="omni", xi=float("nan")),
      "camera.xi must be a finite number >= 0"),
+    (lambda c: c["camera"].update(model="mei", xi=1.0e300, D=[0.03, -0.08, 0.0, 0.0]),
+     "camera.xi must be at most 100 (the unified model's mirror parameter: about 1 for "
+     "mirrors, up to about 3 for fisheye lenses), got 1e+300"),
     (lambda c: c["camera"].update(model="mei", xi=1.0, D=[0.1, 0.2, 0.3]),
      "camera.D must hold the Mei model's k1, k2, p1, p2 [, k3], got 3"),
     (lambda c: c["camera"].update(D=[0.0] * 13 + [0.01]),

@@ -73,6 +73,12 @@ _R_HUGE = 1e6
 _NEWTON_STEPS = 64
 
 
+#: The largest Mei (unified) ``xi``, the distance of the projection centre from the unit
+#: sphere's centre: about 1 for catadioptric mirrors, up to about 3 for fisheye lenses. A value
+#: a hundred times a real lens's is a typing error (1e300 overflowed the arithmetic).
+MAX_XI = 100.0
+
+
 @dataclass(frozen=True, eq=False)
 class Camera:
     """A camera's intrinsics: ``K``, image size and lens model.
@@ -129,6 +135,8 @@ class Camera:
         xi = float(self.xi)
         if not np.isfinite(xi) or xi < 0:
             raise ValueError(f"xi must be a finite number >= 0, got {self.xi!r}")
+        if xi > MAX_XI:
+            raise ValueError(f"xi must be at most {MAX_XI:g}, got {self.xi!r}")
         if self.mount is not None:
             mount = check_rigid(self.mount, "camera", key="mount")
             mount.setflags(write=False)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import MAX_XI, Camera
 from ..errors import PATH_CHARS, InputError, SettingsError, excerpt, first_line, key_list, quote
 from ..geometry import check_rigid
 from .bags import extract_hint, is_bag
@@ -249,6 +249,10 @@ def _intrinsics(path: str | Path, where: dict[str, str], K, width, height, D, mo
             ok = False
         if not ok:
             raise InputError(f"{path}: {where['xi']} must be a finite number >= 0, got {quote(xi)}")
+        if float(xi_v) > MAX_XI:
+            raise InputError(f"{path}: {where['xi']} must be at most {MAX_XI:g} (the unified "
+                             "model's mirror parameter: about 1 for mirrors, up to about 3 for "
+                             f"fisheye lenses), got {quote(xi)}")
         xi = float(xi_v)
     elif D is not None:
         if D.size not in _OPENCV_D_SIZES:
