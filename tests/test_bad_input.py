@@ -469,6 +469,91 @@ def test_bad_config_file(capfd, tmp_path, rig, text, expect):
         expect=(str(cfg), expect))
 
 
+@pytest.mark.parametrize("text, expect", [
+    ("search: {seed_grid_deg: 0.001}\n",
+     "search.seed_grid_deg 0.001: a grid over +-15 deg in steps of 0.001 deg holds "
+     "27,002,700,090,001 rotations, more than the 1,000,000 the seeding scores (about a second "
+     "per 10,000 on 20 frames); use a step of at least 0.31 deg, or null for no grid"),
+    ("search: {seed_grid_t_m: 1.0e-6}\n",
+     "search.seed_grid_t_m 1e-06: a joint grid of 343 rotations (+-15 deg in steps of 5 deg) "
+     "and translations over +-0.45 m in steps of 1e-06 m holds"),
+    ("features: {grid: [100000, 100000]}\n", "features.grid [100000, 100000]: must lie in "
+                                              "[1, 1024]"),
+    ("objective: {truncation_px: 1.0e+300}\n",
+     "objective.truncation_px 1e+300: must lie in (0, 16384]"),
+    ("objective: {contrast: 1.0e+300}\n", "objective.contrast 1e+300: must lie in [0, 100]"),
+    ("features: {blur_sigma: 1.0e+6}\n", "features.blur_sigma 1e+06: must lie in [0, 50]"),
+], ids=["seed grid step", "joint grid step", "feature grid", "truncation", "contrast", "blur"])
+def test_config_values_without_a_sensible_range_are_refused(capfd, tmp_path, rig, text, expect):
+    """Values validation let through, which then failed with exit 1 (MemoryError, LinAlgError,
+    OpenCV's bad_array_new_length): every numeric setting now has a range (config.ranges)."""
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text(text)
+    bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--config", cfg, *FAST,
+        expect=(f"{cfg}: {expect}",))
+
+
+def test_every_numeric_setting_has_a_range():
+    """Every whole-number and number setting of every section has a range (config.ranges)
+    that holds its default; a value beyond either end is refused, naming the setting."""
+    import dataclasses as dc
+
+    from paretocal.config import _field_types, _option, ranges
+    from paretocal.errors import SettingsError
+
+    base = Settings()
+    numeric = {("", "camera")}
+    for f in dc.fields(Settings):
+        section = getattr(base, f.name)
+        if dc.is_dataclass(section):
+            numeric |= {(f.name, k) for k, a in _field_types(type(section)).items()
+                        if a.split("|")[0].strip() in ("int", "float", "tuple[int, int]")}
+    assert numeric == set(ranges())
+    for (section, name), r in ranges().items():
+        default = getattr(base if not section else getattr(base, section), name)
+        values = default if isinstance(default, tuple) else (default,)
+        assert all(v is None or r.holds(v) for v in values), (section, name)
+        integer = isinstance(values[0], int)
+        beyond = [r.low - 1 if integer or not r.open_low else r.low]
+        if r.high is not None:
+            beyond.append(r.high + 1 if integer else r.high * 2 if r.high else 1.0)
+        for v in beyond:
+            value = (v,) * len(values) if isinstance(default, tuple) else v
+            with pytest.raises(SettingsError) as info:
+                if section:
+                    base.replace(**{section: {name: value}}).validate()
+                else:
+                    dc.replace(base, **{name: value}).validate()
+            assert name in str(info.value) or _option(name) in str(info.value), info.value
+
+
+@pytest.mark.parametrize("search", [
+    {"seed_grid_deg": 0.001}, {"seed_grid_deg": 0.001, "bound_r_deg": 90},
+    {"seed_grid_deg": 0.01, "init_error_deg": 3}, {"seed_grid_t_m": 1e-6},
+    {"seed_grid_t_m": 1e-4, "bound_t_m": 5, "bound_r_deg": 40}])
+def test_the_step_a_seed_grid_refusal_suggests_is_accepted(search):
+    import re
+
+    from paretocal.errors import SettingsError
+
+    with pytest.raises(SettingsError) as info:
+        Settings().replace(search=search).validate()
+    key = next(k for k in search if k.startswith("seed_grid"))
+    step = float(re.search(r"a step of at least ([0-9.e+-]+)", str(info.value)).group(1))
+    Settings().replace(search=dict(search, **{key: step})).validate()
+
+
+def test_a_checkpoint_of_the_most_generations_is_a_text_the_reader_takes():
+    """The checkpoint's metadata holds a record per generation and is read back as a text of
+    at most MAX_TEXT_BYTES: search.gens is bounded so that it fits, with long figures."""
+    from paretocal.config import ranges
+    from paretocal.io.text import MAX_TEXT_BYTES
+
+    gens = ranges()[("search", "gens")].high
+    record = {"gen": gens, "best_f1": -1.2345678901234567e-05, "evaluations": 10 ** 12}
+    assert len(json.dumps([record] * gens)) + 1000 < MAX_TEXT_BYTES
+
+
 def test_config_that_is_an_image(capfd, tmp_path, rig, raw_frames):
     cfg = rig / "images" / f"{_stem(raw_frames)}.png"
     bad(capfd, "calibrate", rig, "--out", tmp_path / "o", "--config", cfg, *FAST,

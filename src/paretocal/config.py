@@ -11,6 +11,7 @@ Unknown sections or keys are errors (a typo must not silently fall back to a def
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -254,6 +255,10 @@ class Settings:
         _check_decision(self.decision)
         _check_motion(self.motion)
         _check_features(self.features)
+        if not 0 <= self.camera <= 3:          # the words of the layouts that have cameras
+            raise SettingsError(f"--camera {self.camera}: must be 0, 1, 2 or 3")
+        _check_ranges(self)
+        _check_seed_grids(self.search)
         return self
 
 
@@ -380,6 +385,199 @@ def _check_features(f: FeatureSettings) -> None:
         raise SettingsError(f"features: {', '.join(negative)} must not be negative")
 
 
+@dataclass(frozen=True)
+class Range:
+    """The values a numeric setting may take: ``low`` to ``high`` (None: bounded elsewhere),
+    each end included unless ``open_low`` / ``open_high``; ``why`` says what bounds it."""
+
+    low: float
+    high: float | None
+    why: str
+    open_low: bool = False
+    open_high: bool = False
+
+    def holds(self, value: float) -> bool:
+        """Whether ``value`` lies in the range."""
+        above = value > self.low if self.open_low else value >= self.low
+        below = (self.high is None
+                 or (value < self.high if self.open_high else value <= self.high))
+        return above and below
+
+    def words(self) -> str:
+        """The range as an interval: ``[0, 50]``, ``(0, 16384]``, ``[4, ...)``."""
+        high = "..." if self.high is None else f"{self.high:g}"
+        return (f"{'(' if self.open_low else '['}{self.low:g}, {high}"
+                f"{')' if self.open_high or self.high is None else ']'}")
+
+
+#: Metres: beyond the range of the longest-range LiDARs (a few hundred metres).
+MAX_RANGE_M = 1000.0
+#: The largest gradient Canny can threshold on an 8-bit image: 3x3 Sobel, L2 norm,
+#: 4 x 255 x sqrt(2) = 1442.5 (paretocal.features.image.edge_map).
+MAX_GRADIENT = 1443.0
+#: Rotations (or joint rotation x translation poses) a seed grid may score: the paper's grid
+#: (+-25 deg in steps of 2.5 deg) holds 9,261, about a second on 20 frames; a million is
+#: under two minutes.
+MAX_SEED_GRID = 1_000_000
+#: Step of the rotations of the joint rotation x translation seed grid (deg,
+#: paretocal.search.seeding).
+SEED_JOINT_STEP_DEG = 5.0
+#: Generations of a search: its checkpoint keeps a record of every generation (at most about
+#: 80 bytes of JSON) in its metadata, which is read back as a text of at most 8 MiB
+#: (``paretocal.io.text.MAX_TEXT_BYTES``).
+MAX_GENS = 100_000
+_M = f"metres: within the longest LiDAR range ({MAX_RANGE_M:g} m)"
+_WEIGHT = "a weight against the edge terms' 1: at 100 they count for 1 %"
+_FRACTION = "a place between the near ray (0) and the far one (1)"
+_ETA = ("a distribution index: children lie about 1/eta of the box from their parents; "
+        "beyond 1000 they copy them")
+_SENSORS = "metres: one vehicle's sensors lie within a few metres of each other"
+
+
+@functools.cache
+def ranges() -> dict[tuple[str, str], Range]:
+    """The range of every numeric setting, by (section, name) (section "" for the top level),
+    checked by :meth:`Settings.validate` after the settings' own checks, which word the most
+    common mistakes; docs/calibrating.md lists them. Pixels are bounded by the side of the
+    largest square image the readers accept, points by the largest cloud (the readers'
+    limits, :mod:`paretocal.io`, imported here on first use: the command line reads this
+    module's choices at start-up)."""
+    from .io.clouds import MAX_CLOUD_POINTS
+    from .io.images import MAX_IMAGE_PIXELS
+
+    max_px = math.isqrt(MAX_IMAGE_PIXELS)
+    px = f"pixels: no distance within an image is longer than the largest image's side ({max_px})"
+    points = f"points: no cloud holds more ({MAX_CLOUD_POINTS:,})"
+    return {
+        ("features", "blur_sigma"): Range(0, 50, "pixels: a blur of sigma leaves Canny the edges "
+                                          "of structure wider than about 2 sigma; beyond 50 px "
+                                          "those the LiDAR sees are gone, and the blur alone "
+                                          "takes seconds a frame"),
+        ("features", "canny_low"): Range(0, MAX_GRADIENT, "a gradient: no gradient of an 8-bit "
+                                         "image exceeds 1443"),
+        ("features", "canny_high"): Range(0, MAX_GRADIENT, "a gradient: no gradient of an 8-bit "
+                                          "image exceeds 1443"),
+        ("features", "canny_noise"): Range(0, MAX_GRADIENT, "noise deviations: beyond 1443 no "
+                                           "gradient of an image noisy by a grey level reaches "
+                                           "them", open_low=True),
+        ("features", "min_edge_px"): Range(0, MAX_IMAGE_PIXELS, "pixels of a fragment: at most "
+                                           "the largest image's"),
+        ("features", "depth_jump_m"): Range(0, MAX_RANGE_M, _M),
+        ("features", "cross_jump_m"): Range(0, MAX_RANGE_M, _M),
+        ("features", "cross_jump_rel"): Range(0, MAX_RANGE_M, "times the near return's range: "
+                                              "returns 1 m away and within the longest range "
+                                              "never jump more"),
+        ("features", "ground_tol_m"): Range(0, MAX_RANGE_M, _M),
+        ("features", "along_fraction"): Range(0, 1, _FRACTION),
+        ("features", "cross_fraction"): Range(0, 1, _FRACTION),
+        ("features", "intensity_jump"): Range(0, 100, "times the 99th percentile of the "
+                                              "intensities: beyond 100 only outliers jump so"),
+        ("features", "min_range_m"): Range(0, MAX_RANGE_M, _M, open_high=True),
+        ("features", "max_range_m"): Range(0, MAX_RANGE_M, _M, open_low=True),
+        ("features", "smooth_ratio"): Range(0, MAX_CLOUD_POINTS, "smooth points per depth edge: "
+                                            "no cloud holds more points"),
+        ("features", "view_margin_px"): Range(0, max_px, px),
+        ("features", "z_min"): Range(0, MAX_RANGE_M, _M, open_low=True),
+        ("features", "grid"): Range(1, 1024, "image cells per side: cells at least 16 px wide on "
+                                    "the largest image, a million at most, more than the feature "
+                                    "points a frame holds"),
+        ("objective", "truncation_px"): Range(0, max_px, px, open_low=True),
+        ("objective", "w_edge"): Range(0, 1, "w1, with w2 = 1 - w1"),
+        ("objective", "contrast"): Range(0, 100, _WEIGHT),
+        ("objective", "ucb_k"): Range(0, 100, "standard errors of the sampling"),
+        ("objective", "holdout"): Range(0, 0.9, "a share of each frame's points", open_high=True),
+        ("search", "pop"): Range(4, None, "individuals: at most what fits in memory "
+                                 "(check_population_memory)"),
+        ("search", "gens"): Range(1, MAX_GENS, "generations: the checkpoint's record of them "
+                                  "must stay a text of at most 8 MiB"),
+        ("search", "seed"): Range(0, 2 ** 63 - 1, "a 64-bit whole number"),
+        ("search", "init_error_deg"): Range(0, 60, "degrees: a start further off is not an "
+                                            "initial guess", open_low=True),
+        ("search", "init_error_m"): Range(0, 10, _SENSORS, open_low=True),
+        ("search", "bound_t_m"): Range(0, 10, _SENSORS, open_low=True),
+        ("search", "bound_r_deg"): Range(0, 90, "degrees", open_low=True),
+        ("search", "n_min"): Range(1, MAX_CLOUD_POINTS, points),
+        ("search", "n_max"): Range(1, MAX_CLOUD_POINTS, points),
+        ("search", "sbx_prob"): Range(0, 1, "a probability"),
+        ("search", "sbx_eta"): Range(0, 1000, _ETA),
+        ("search", "pm_eta"): Range(0, 1000, _ETA),
+        ("search", "seed_grid_deg"): Range(0, 90, "degrees, at most the largest rotation bound",
+                                           open_low=True),
+        ("search", "seed_truncation_px"): Range(0, max_px, px, open_low=True),
+        ("search", "seed_points"): Range(1, MAX_CLOUD_POINTS, points),
+        ("search", "seed_count"): Range(0, MAX_SEED_GRID, "poses of the seed grid: no grid holds "
+                                        "more"),
+        ("search", "seed_grid_t_m"): Range(0, 10, "metres, at most the largest translation bound",
+                                           open_low=True),
+        ("decision", "budget_ms"): Range(0, 3.6e6, "milliseconds of one evaluation: an hour is "
+                                         "beyond any", open_low=True),
+        ("decision", "max_deviation_px"): Range(0, max_px, px, open_low=True),
+        ("decision", "polish_iters"): Range(0, 1000, "Newton iterations: the polish converges in "
+                                            "about a dozen"),
+        ("decision", "restarts"): Range(0, 10, "restarts of the search"),
+        ("decision", "restart_share"): Range(0, 1, "a share of the search's evaluations",
+                                             open_low=True),
+        ("motion", "time_offset_s"): Range(-1, 1, "seconds: a sweep lasts a tenth of one"),
+        ("motion", "points"): Range(1000, MAX_CLOUD_POINTS, points),
+        ("", "camera"): Range(0, 3, "KITTI's cameras (other layouts ignore it)"),
+    }
+
+
+def _check_ranges(settings: Settings) -> None:
+    """Raise :class:`SettingsError` naming the first setting outside its :func:`ranges`."""
+    for (section, name), r in ranges().items():
+        value = getattr(settings if not section else getattr(settings, section), name)
+        values = value if isinstance(value, tuple) else (value,)
+        if all(v is None or r.holds(v) for v in values):
+            continue
+        key = f"{section}.{name}" if section else name
+        shown = list(value) if isinstance(value, tuple) else f"{value:g}"
+        raise SettingsError(f"{key} {shown}: must lie in {r.words()} ({r.why})")
+
+
+def grid_half_steps(bound: float, step: float) -> int:
+    """Steps on each side of zero of a seed grid over +-``bound`` in steps of ``step``
+    (``paretocal.search.seeding``: ``2 k + 1`` values per axis)."""
+    return math.floor(bound / step + 1e-9)
+
+
+def _least_step(bound: float, poses: int) -> float:
+    """The smallest step (two significant digits) whose 3-D grid over +-``bound`` holds at
+    most ``poses`` points (at least one)."""
+    per_axis = max(round(poses ** (1 / 3)), 1)
+    while per_axis ** 3 > poses and per_axis > 1:
+        per_axis -= 1
+    k = (per_axis - 1) // 2                  # steps on each side of zero
+    exact = bound / (k + 1)                  # a step above this leaves k on each side
+    unit = 10.0 ** (math.floor(math.log10(exact)) - 1)
+    return (math.floor(exact / unit) + 1) * unit
+
+
+def _check_seed_grids(s: SearchSettings) -> None:
+    """The seed grids (``paretocal.search.seeding``) must hold at most
+    :data:`MAX_SEED_GRID` poses: their step follows from the box they span."""
+    if s.seed_grid_deg:
+        rotations = (2 * grid_half_steps(s.bound_r, s.seed_grid_deg) + 1) ** 3
+        if rotations > MAX_SEED_GRID:
+            least = _least_step(s.bound_r, MAX_SEED_GRID)
+            raise SettingsError(
+                f"search.seed_grid_deg {s.seed_grid_deg:g}: a grid over +-{s.bound_r:g} deg "
+                f"in steps of {s.seed_grid_deg:g} deg holds {rotations:,} rotations, more than "
+                f"the {MAX_SEED_GRID:,} the seeding scores (about a second per 10,000 on 20 "
+                f"frames); use a step of at least {least:g} deg, or null for no grid")
+    if s.seed_grid_deg and s.seed_grid_t_m and s.bound_t > s.seed_grid_t_m:
+        rotations = (2 * grid_half_steps(s.bound_r, SEED_JOINT_STEP_DEG) + 1) ** 3
+        poses = rotations * (2 * grid_half_steps(s.bound_t, s.seed_grid_t_m) + 1) ** 3
+        if poses > MAX_SEED_GRID:
+            least = _least_step(s.bound_t, MAX_SEED_GRID // rotations)
+            raise SettingsError(
+                f"search.seed_grid_t_m {s.seed_grid_t_m:g}: a joint grid of {rotations:,} "
+                f"rotations (+-{s.bound_r:g} deg in steps of {SEED_JOINT_STEP_DEG:g} deg) and "
+                f"translations over +-{s.bound_t:g} m in steps of {s.seed_grid_t_m:g} m holds "
+                f"{poses:,} poses, more than the {MAX_SEED_GRID:,} the seeding scores; use a "
+                f"step of at least {least:g} m, or null for no joint grid")
+
+
 #: The allowed values of every setting that takes a word, by (section, name): the one list the
 #: validation, the command line's choices and the documentation read.
 CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
@@ -399,7 +597,9 @@ _OPTIONS = {"pop": "--pop", "gens": "--gens", "seed": "--seed", "n_min": "--n-mi
             "w_edge": "--w-edge", "budget_ms": "--budget-ms",
             "max_deviation_px": "--max-deviation", "truncation_px": "--truncation",
             "rule": "--rule", "chamfer": "--chamfer", "cost": "--cost",
-            "evaluator": "--evaluator", "deskew": "motion.deskew"}
+            "evaluator": "--evaluator", "deskew": "motion.deskew",
+            "init_error_deg": "--init-error", "init_error_m": "--init-error",
+            "time_offset_s": "--time-offset"}
 
 
 def _option(name: str) -> str:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import ObjectiveSettings, SearchSettings
+from ..config import SEED_JOINT_STEP_DEG, ObjectiveSettings, SearchSettings, grid_half_steps
 from .polish import newton_polish
 
 JOINT_FRAMES = 6  # frames scoring the joint rotation x translation grid
@@ -21,7 +21,7 @@ JOINT_FRAMES = 6  # frames scoring the joint rotation x translation grid
 
 def rotation_grid(bound_deg: float, step_deg: float) -> np.ndarray:
     """All (yaw, pitch, roll) on a regular grid within +-bound, shape (G, 3), degrees."""
-    k = int(np.floor(bound_deg / step_deg + 1e-9))
+    k = grid_half_steps(bound_deg, step_deg)
     axis = np.arange(-k, k + 1) * step_deg
     g = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
     return g
@@ -29,14 +29,15 @@ def rotation_grid(bound_deg: float, step_deg: float) -> np.ndarray:
 
 def translation_grid(bound_m: float, step_m: float) -> np.ndarray:
     """All (x, y, z) on a regular grid within +-bound, shape (G, 3), metres."""
-    k = int(np.floor(bound_m / step_m + 1e-9))
+    k = grid_half_steps(bound_m, step_m)
     axis = np.arange(-k, k + 1) * step_m
     return np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
 def grid_seeds(  # noqa: PLR0913 - the grid, then keyword-only options
         chamfer, bound_r_deg: float, bound_t_m: float, step_deg: float, n: int, keep: int, *,
-        chunk: int = 4096, step_t_m: float | None = None, joint_step_deg: float = 5.0,
+        chunk: int = 4096, step_t_m: float | None = None,
+        joint_step_deg: float = SEED_JOINT_STEP_DEG,
         joint_n: int = 30, joint_chamfer=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``keep`` best poses from a rotation grid, polished on the same objective.
 
