@@ -397,6 +397,25 @@ def test_a_cost_model_cache_nested_too_deeply_is_measured_again(tmp_path, start,
     assert json.loads(cache.read_text())["ms_per_point"] == 1e-5
 
 
+@pytest.mark.parametrize("edit", [{"ms_fixed": -1000.0}, {"ms_per_point": float("nan")},
+                                  {"points_min": 5, "points_max": 2}, {"probe": None}],
+                         ids=["negative time", "NaN slope", "inverted range", "no probe"])
+def test_a_cost_model_cache_that_no_measurement_gives_is_measured_again(tmp_path, start,
+                                                                      monkeypatch, edit):
+    """A cache file edited to ms_fixed -1000 was used ("-1000 ms/eval modelled", objectives.ms
+    -999.99): the cache is checked as the checkpoint's copy is, and measured again."""
+    frames, T = start
+    monkeypatch.setenv("PARETOCAL_CACHE_DIR", str(tmp_path / "cache"))
+    _timing(monkeypatch, 1e-5)
+    calibrate(frames, T, BUDGET)
+    (cache,) = (tmp_path / "cache").glob("cost-*.json")
+    cache.write_text(json.dumps(dict(json.loads(cache.read_text()), **edit)))
+    again = calibrate(frames, T, BUDGET)
+    assert again.cost_model.probe["source"] == "measured"
+    assert again.cost_model.ms_fixed == 0.0 and again.objectives()["ms"] > 0
+    assert json.loads(cache.read_text())["ms_fixed"] == 0.0
+
+
 def test_a_resumed_run_decides_with_the_interrupted_runs_cost_model(tmp_path, start,
                                                                     monkeypatch):
     frames, T = start

@@ -129,7 +129,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         if checkpoint is not None:
             stored = checkpoint.stored_cost_model()
             if stored:
-                cost = CostModel(**dict(stored, probe=dict(
+                cost = CostModel.from_dict(dict(stored, probe=dict(
                     stored["probe"], source=f"checkpoint {checkpoint.path}")))
         stage = Stage(frames, T_init, T_init, settings, report("features"), rings, cost=cost,
                       images=None if wide is None else wide.images)

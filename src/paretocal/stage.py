@@ -237,7 +237,7 @@ def cost_model(scene, evaluator: str, T_view: np.ndarray, n_min: int, n_max: int
     path = folder / f"cost-{key[:20]}.json" if folder is not None else None
     if path is not None and path.is_file():
         try:
-            line = CostModel(**load_json(path.read_text(encoding="utf-8"), path))
+            line = CostModel.from_dict(load_json(path.read_text(encoding="utf-8"), path))
             return line.for_scene(scene, n_min, n_max, source=f"cache {path}")
         except (OSError, ValueError, TypeError, ParetocalError) as exc:
             log.info("%s: unreadable cost model (%s); measuring again", path, exc)

@@ -22,8 +22,9 @@ from run to run.
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -108,6 +109,26 @@ class CostModel:
         """The model's fields, as ``result.json``'s ``cost_model`` holds them."""
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, model) -> "CostModel":
+        """The model :meth:`to_dict` wrote, checked to be one a measurement gives: exactly
+        the fields, finite non-negative times and sizes, a point range ``0 <= points_min <=
+        points_max`` and a ``probe`` mapping. Raises ValueError otherwise (a cache file or a
+        checkpoint's copy edited or damaged: a model with ``ms_fixed`` -1000 would model
+        evaluations of -999 ms)."""
+        names = {f.name for f in fields(cls)}
+        numbers = ("ms_fixed", "ms_per_point", "bytes_fixed", "bytes_per_point")
+        ok = (isinstance(model, dict) and set(model) == names
+              and isinstance(model["probe"], dict)
+              and all(_is_number(model[k]) and math.isfinite(model[k]) and model[k] >= 0
+                      for k in numbers)
+              and _is_int(model["points_min"]) and _is_int(model["points_max"])
+              and 0 <= model["points_min"] <= model["points_max"])
+        if not ok:
+            raise ValueError("not a cost model a measurement gives (its fields, finite "
+                             "non-negative times and sizes, a point range, a probe)")
+        return cls(**model)
+
     def for_scene(self, scene: Scene, n_min: int, n_max: int, source: str | None = None
                   ) -> "CostModel":
         """This model's time line applied to another scene of the same frames (the feature
@@ -133,6 +154,14 @@ class CostModel:
                          bytes_fixed=_bytes_fixed(scene), bytes_per_point=float(BYTES_PER_POINT),
                          points_min=int(scene.points_used(n_min)),
                          points_max=int(scene.points_used(n_max)), probe=probe)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def _bytes_fixed(scene: Scene) -> float:
