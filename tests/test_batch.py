@@ -137,6 +137,29 @@ def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_
     assert "2 ok, 0 failed, 2 already done" in capsys.readouterr().out
 
 
+def test_an_edited_record_is_not_taken_for_a_done_entry(manifest, first_run, tmp_path):
+    """runs/<id>/entry.json edited (its extrinsic changed, its fingerprint kept), with its
+    result.json deleted or not: the entry was counted done and the forged extrinsic went into
+    summary.csv. A record is done only as written for the run published beside it."""
+    out = tmp_path / "out"
+    shutil.copytree(first_run[0], out)
+    forged = np.eye(4).tolist()
+    for eid in ("car1_a", "car1_b"):
+        path = out / "runs" / eid / "entry.json"
+        path.write_text(json.dumps(dict(json.loads(path.read_text()), T_cam_lidar=forged)))
+    (out / "runs" / "car1_a" / "result.json").unlink()
+    r = run_batch(manifest, out, TINY, workers=1, check=True)
+    assert (r["ran"], r["skipped"], r["ok"]) == (3, 0, 2)
+    with open(out / "summary.csv") as fh:
+        rows = {row["id"]: row for row in csv.DictReader(fh)}
+    for eid in ("car1_a", "car1_b"):
+        T = json.loads((out / "runs" / eid / "result.json").read_text())["T_cam_lidar"]
+        assert float(rows[eid]["T_00"]) == T[0][0] != 1.0
+    # As written, the records are done.
+    again = run_batch(manifest, out, TINY, workers=1, check=True)
+    assert (again["ran"], again["skipped"]) == (1, 2)
+
+
 def tiny_config(folder):
     path = folder / "tiny.yaml"
     path.write_text(yaml.safe_dump({"search": {"pop": 16, "gens": 3},
@@ -295,6 +318,8 @@ BAD_MANIFESTS = {
     "csv row too long": ("m.csv", b"id,source\na,x,extra\n",
                          "line 2: 2 columns in the header, more values in this row"),
     "csv header only": ("m.csv", b"id,source\n", "the manifest lists no entries"),
+    "id with a line break": ("m.yaml", b'- {id: "a\\n", source: x}\n',
+                             "entry 1: id 'a\\n' must be letters, digits, '_', '-' or '.'"),
     "nested 100,000 deep": ("m.yaml", b"[" * 100_000 + b"]" * 100_000,
                             "its values are nested too deeply to be read"),
 }

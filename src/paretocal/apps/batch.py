@@ -44,7 +44,9 @@ RECORD = "entry.json"
 #: into a non-empty folder holding none of them unless told to (``--force``).
 BATCH_MARKS = ("runs", "summary.csv")
 log = logging.getLogger(__name__)
-_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+#: An entry's id names its folder: letters, digits, '_', '-' and '.' (matched whole: ``$``
+#: would take a trailing line break).
+_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 SUMMARY_COLUMNS = ["id", "vehicle", "order", "status", "reason", "source", "frames",
                    "n_points", "drift_rotation_deg", "drift_translation_cm",
                    "ref_rotation_deg", "ref_translation_cm", "chamfer", "ms_per_eval",
@@ -133,7 +135,7 @@ def read_manifest(path: str | Path) -> list[Entry]:
         # An Entry's fields, each of its own type (text; an integer camera).
         fields: dict[str, Any] = {key: _field(where, key, v) for key, v in row.items()}
         eid = fields["id"]
-        if not _ID.match(eid):
+        if not _ID.fullmatch(eid):
             raise InputError(f"{where}: id {quote(eid)} must be letters, digits, '_', '-' or '.'")
         if eid in seen:
             raise InputError(f"{where}: duplicate id {quote(eid)}")
@@ -220,15 +222,42 @@ def _field(where: str, key: str, value) -> str | int:
 
 
 def read_record(run_dir: Path) -> dict | None:
-    """The entry's record, or None when it has none (or an unreadable one)."""
+    """The entry's record, or None when it has none, an unreadable one, or one that is not
+    as :func:`write_record` wrote it for the run published beside it (its digest: an edited
+    record, or a calibrated entry's result.json changed or gone)."""
     from ..io.text import load_json
 
     path = Path(run_dir) / RECORD
     try:
         record = load_json(path.read_text(encoding="utf-8"), path)
+        if not isinstance(record, dict) or record.get("digest") != _digest(record, run_dir):
+            return None
     except (OSError, ValueError, ParetocalError):           # ValueError: not UTF-8
         return None
-    return record if isinstance(record, dict) else None
+    return record
+
+
+def write_record(run_dir: Path, record: dict) -> None:
+    """Write ``record`` as the entry's ``entry.json`` in ``run_dir`` (atomic), with the digest
+    :func:`read_record` checks: of the record and, for a calibrated entry, of the result.json
+    published beside it (which must be there)."""
+    record = json.loads(dumps(record))          # as it reads back (arrays as lists)
+    record["digest"] = _digest(record, run_dir)
+    atomic_write_text(Path(run_dir) / RECORD, dumps(record, indent=1))
+
+
+def _digest(record: dict, run_dir: Path) -> str:
+    """SHA-256 of ``record`` (without its digest, as sorted JSON) and, when it says the entry
+    calibrated, of ``run_dir/result.json`` (read without following a link). Raises OSError
+    when that file cannot be read."""
+    from ..io.paths import open_plain
+
+    h = hashlib.sha256(json.dumps({k: v for k, v in record.items() if k != "digest"},
+                                  sort_keys=True).encode())
+    if record.get("status") == "ok":
+        with open_plain(Path(run_dir) / "result.json", "a run's result") as fh:
+            h.update(fh.read())
+    return h.hexdigest()
 
 
 def entry_fingerprint(entry: Entry, settings: dict, check: bool = True,
@@ -364,7 +393,7 @@ def run_entry(entry: Entry, settings: dict, out_dir: str, check: bool = True,
                 (run_dir / RECORD).unlink(missing_ok=True)
                 record = _attempt(entry, settings, run_dir, check, threads, figures, t0)
                 record.update({"fingerprint": fingerprint, "log": messages})
-                atomic_write_text(run_dir / RECORD, dumps(record, indent=1))
+                write_record(run_dir, record)
         except (ParetocalError, OSError) as exc:   # the folder is locked or cannot be written
             record = _failed(entry, str(exc), t0)
             record.update({"fingerprint": fingerprint, "log": messages})
@@ -594,7 +623,7 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, by_entry: di
                 rec["fingerprint"] = prints[e.id]
                 run_dir = out / "runs" / e.id
                 run_dir.mkdir(parents=True, exist_ok=True)
-                atomic_write_text(run_dir / RECORD, json.dumps(rec, indent=1) + "\n")
+                write_record(run_dir, rec)
             records[e.id] = rec
             _relay(rec)
             if progress is not None:
