@@ -107,6 +107,20 @@ def bad_cli(capfd, *args, expect: str | tuple[str, ...]) -> str:
     return lines[0]
 
 
+def run_with_stdout_closed(*args, timeout: float = 600) -> tuple[int, str]:
+    """The console script (``python -m paretocal``) in a child process whose stdout is a pipe
+    its reader closed before anything was written (``paretocal ... | true``): ``(exit status,
+    stderr)``."""
+    import subprocess
+
+    proc = subprocess.Popen([sys.executable, "-m", "paretocal", *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()
+    err = proc.stderr.read()
+    proc.stderr.close()
+    return proc.wait(timeout=timeout), err
+
+
 def default_sigint() -> None:
     """``preexec_fn`` for a child process a test sends SIGINT: a test session started in the
     background (``nohup``, ``&`` in a script) has SIGINT ignored, children inherit that and

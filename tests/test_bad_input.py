@@ -35,7 +35,8 @@ from paretocal.errors import ParetocalError
 from paretocal.geometry import correction_matrix, invert, rotation_zyx
 from paretocal.io import load_frames, write_extrinsic
 
-from .helpers import bad_cli as bad, default_sigint, run_cli as run, write_generic
+from .helpers import (bad_cli as bad, default_sigint, run_cli as run, run_with_stdout_closed,
+                      write_generic)
 
 FAST = ["--pop", "16", "--gens", "3", "--no-polish", "--frames", "0:2", "--no-figures",
         "--checkpoint-every", "0"]
@@ -1762,6 +1763,24 @@ def _caught(pid: int) -> int:
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("command", ["calibrate", "check"])
+def test_a_closed_stdout_ends_the_command_quietly(tmp_path, rig, command):
+    """stdout a pipe whose reader is gone (``calibrate ... | true``): the command did its work
+    and exited 1 without a word; now it finishes (the run folder whole) and exits 141, the
+    status of a writer whose reader left (128 + SIGPIPE), with no error line."""
+    from paretocal.cli import PIPE_EXIT
+
+    args = (["calibrate", rig, "--out", tmp_path / "o", *FAST] if command == "calibrate" else
+            ["check", rig, "--frames", "0:2"])
+    code, err = run_with_stdout_closed(*args)
+    assert code == PIPE_EXIT == 141, err
+    assert "error" not in err and "Traceback" not in err, err
+    if command == "calibrate":
+        names = {p.name for p in (tmp_path / "o").iterdir()}
+        assert {"result.json", "run_args.json", "pareto.csv"} <= names, names
+        assert not {".staging", ".lock"} & names
+
+
 @pytest.mark.parametrize("how", ["-m", "console"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])

@@ -20,7 +20,7 @@ from paretocal.io import load_frames, read_extrinsic, write_extrinsic
 from paretocal.io.bags import (camera_from_info, cloud_array, compressed_image, image_array,
                                pair_by_stamp)
 
-from .helpers import bad_cli as bad, run_cli as run, without_progress
+from .helpers import bad_cli as bad, run_cli as run, run_with_stdout_closed, without_progress
 
 if (os.environ.get("PARETOCAL_REQUIRE_OPTIONAL") == "1"
         and importlib.util.find_spec("rosbags") is None):
@@ -561,6 +561,15 @@ class TestBadBags:
         assert line == (f"paretocal: error: {small_bag}: which topics to extract? pass "
                         "--image-topic TOPIC (image topics: /depth, /img); camera info topics: "
                         "/info; the bag's topics are listed on stdout")
+        assert not (tmp_path / "o").exists()
+
+    def test_with_stdout_closed_the_error_line_is_kept(self, tmp_path, small_bag):
+        """The topics listed on a closed stdout (``extract ... | head -0``): the listing is
+        lost, the exit-2 line saying which option to pass is not (it was: exit 1, no line)."""
+        code, err = run_with_stdout_closed("extract", small_bag, "--out", tmp_path / "o")
+        assert code == 2, err
+        (line,) = without_progress(err)
+        assert line.startswith(f"paretocal: error: {small_bag}: which topics to extract?")
         assert not (tmp_path / "o").exists()
 
     def test_no_pairs_within_the_tolerance_gives_the_nearest(self, tmp_path, capfd, small_bag):

@@ -3,7 +3,7 @@
 Exit status: 0 success, 2 bad input or usage (one line on stderr naming the file or option),
 1 anything unexpected, 130 interrupted; 3 ``calibrate --strict`` with a result judged
 unreliable; 4 ``batch`` with at least one failed entry (the others are done and summary.csv
-is written).
+is written); 141 the work done but stdout's reader gone (``| head``).
 
 The package holds one module per command (``calibrate``, with ``run`` and ``rig`` beside it,
 ``perturb``, ``check``, ``compare``, ``study``, ``depth``, ``extract``, ``batch``), each
@@ -23,7 +23,7 @@ import click
 import typer
 
 from ..errors import MESSAGE_CHARS, STOP, ParetocalError, excerpt
-from ._common import STOP_HANDLER, StageProgress, report
+from ._common import STOP_HANDLER, ReaderMayLeave, StageProgress, report
 
 
 #: The application; each command's module registers its command on it (declared with its type
@@ -66,8 +66,13 @@ from .batch import BATCH_FAILED_EXIT  # noqa: E402
 from .check import features_line  # noqa: E402
 from .run import STRICT_EXIT, interrupted_line, verdict_line  # noqa: E402
 
-__all__ = ["BATCH_FAILED_EXIT", "STRICT_EXIT", "app", "interrupted_line", "log", "main",
-           "verdict_line"]
+__all__ = ["BATCH_FAILED_EXIT", "PIPE_EXIT", "STRICT_EXIT", "app", "interrupted_line", "log",
+           "main", "verdict_line"]
+
+#: Exit status of a command whose stdout's reader left before it finished (``paretocal ... |
+#: head``): 128 + SIGPIPE, as a tool the pipe's signal stops has. Its work is done (its files
+#: written) and its errors are said on stderr; a command that failed keeps its own status.
+PIPE_EXIT = 141
 
 #: The SIGINT and SIGTERM handler that :func:`main` installs.
 _STOP = STOP_HANDLER
@@ -125,11 +130,13 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
     previous = ({sig: signal.signal(sig, _STOP) for sig in (signal.SIGINT, signal.SIGTERM)
                  if signal.getsignal(sig) is not signal.SIG_IGN} if main_thread else {})
     unraisable, sys.unraisablehook = sys.unraisablehook, _quiet_stops(sys.unraisablehook)
+    stdout = sys.stdout = ReaderMayLeave(sys.stdout)
     try:
         command = typer.main.get_command(app)
         rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
         # typer turns KeyboardInterrupt into exit status 130 itself.
-        return _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
+        status = _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
+        return PIPE_EXIT if stdout.left and status == 0 else status
     except ParetocalError as exc:
         # One line, whatever the message holds (control characters escaped, length bounded).
         print(f"paretocal: error: {excerpt(exc, MESSAGE_CHARS)}", file=sys.stderr)
@@ -158,6 +165,7 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
               file=sys.stderr)
         return 1
     finally:
+        sys.stdout = stdout.stream
         sys.unraisablehook = unraisable
         for sig, handler in previous.items():
             signal.signal(sig, signal.SIG_IGN if final else handler)

@@ -6,6 +6,7 @@ interrupted command ended (with the SIGINT and SIGTERM handler that
 from __future__ import annotations
 
 import logging
+import os
 import sys
 from typing import Any
 
@@ -89,6 +90,47 @@ def _phases() -> dict:
     from ..pipeline import PHASES
 
     return PHASES
+
+
+class ReaderMayLeave:
+    """``sys.stdout`` for a command whose reader may go away (``paretocal ... | head``): a
+    write or flush that meets a closed pipe (BrokenPipeError) is dropped, the rest of the
+    output goes to /dev/null, and :attr:`left` says so. The command then finishes its work and
+    its errors still reach stderr (option parsers stop at a closed stdout: click exits 1 and
+    says nothing). Everything else is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.left = False
+
+    def write(self, text: str) -> int:
+        if not self.left:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.left:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        """The reader left: what the stream still buffers goes to /dev/null when it is
+        flushed (at exit), not into a second BrokenPipeError."""
+        self.left = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):
+            pass                           # no descriptor (a test's capture): nothing to flush
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
 
 
 def fmt_err(e: dict | None) -> str:
