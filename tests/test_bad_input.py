@@ -1112,6 +1112,27 @@ def test_out_onto_a_file_is_refused_by_every_command(tmp_path, raw_date, capsys,
     assert code == 2 and "--out" in err and "not a folder" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("command", [
+    ["calibrate", "RIG", *FAST, "--out"], ["calibrate", "--resume"],
+    ["check", "RIG", "--frames", "0:2", "--out"], ["perturb", "RIG", "--out"],
+    ["depth", "RIG", "--frames", "0:1", "--out"], ["study", "RIG", "--out"],
+    ["batch", "MANIFEST", "--out"], ["compare", "INIT", "INIT", "--out"],
+    ["extract", "BAG", "--out"]], ids=lambda c: " ".join(c[:1] + c[-1:]))
+def test_an_empty_path_is_refused(capfd, tmp_path, rig, monkeypatch, command):
+    """``--out ''`` was the current folder: calibrate wrote its run there, exit 0."""
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    init = tmp_path / "init.yaml"
+    write_extrinsic(init, np.eye(4))
+    (tmp_path / "m.yaml").write_text(f"- {{id: a, source: {rig}}}\n")
+    given = {"RIG": rig, "MANIFEST": tmp_path / "m.yaml", "INIT": init, "BAG": tmp_path / "b.bag"}
+    option = command[-1]
+    bad(capfd, *[given.get(a, a) for a in command], "",
+        expect=f"Invalid value for '{option}': the path is empty")
+    assert not list(cwd.iterdir())
+
+
 # --- outputs: checked before the work; a failed write names the file ---------------------------
 
 def _no_space(*args, **kwargs):

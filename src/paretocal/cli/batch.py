@@ -11,14 +11,15 @@ import typer
 from ..errors import SettingsError
 from . import app
 from ._common import StageProgress, report, setup_logging
-from .options import ConfigFile, Force, Quiet, Seed, Verbose
+from .options import ConfigFile, Force, Quiet, Seed, Verbose, output_path
 
 
 @app.command()
 def batch(
     manifest: Annotated[Path, typer.Argument(help="YAML or CSV manifest of entries (id, source, "
                                                   "frames, init, vehicle, camera, order).")],
-    out: Annotated[Path, typer.Option("--out", help="Batch directory (runs/<id>/, summary).")],
+    out: Annotated[Path, typer.Option(
+        "--out", parser=output_path, metavar="PATH", help="Batch directory (runs/<id>/, summary).")],
     scheduler: Annotated[Optional[str], typer.Option(
         help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786; default: a local "
              "cluster.")] = None,

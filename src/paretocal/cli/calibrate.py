@@ -12,7 +12,7 @@ import typer
 from ..errors import SettingsError
 from . import app
 from ._common import setup_logging
-from .options import CameraOrName, ConfigFile, Force, Frames, Quiet, Seed, Verbose
+from .options import CameraOrName, ConfigFile, Force, Frames, Quiet, Seed, Verbose, output_path
 from .rig import calibrate_rig_folder
 from .run import check_run_out, continue_run, run_calibration
 
@@ -48,8 +48,10 @@ def calibrate(
         help="Dataset folder: KITTI raw drive or date folder, KITTI object 'training', or a "
              "generic folder (not needed with --resume); for a ROS bag, run paretocal extract "
              "first.")] = None,
-    out: Annotated[Optional[Path], typer.Option("--out", help="Run directory to write.")] = None,
+    out: Annotated[Optional[Path], typer.Option(
+        "--out", parser=output_path, metavar="PATH", help="Run directory to write.")] = None,
     resume: Annotated[Optional[Path], typer.Option(
+        parser=output_path, metavar="PATH",
         help="Continue the interrupted run in this run directory (same data, start and "
              "settings; the result equals an uninterrupted run).")] = None,
     checkpoint_every: Annotated[int, typer.Option(

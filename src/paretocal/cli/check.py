@@ -10,7 +10,7 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose, output_path
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..crosscheck import MotionAgreement
@@ -24,7 +24,8 @@ def check(
         help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
     camera: Camera = 2,
-    out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
+    out: Annotated[Optional[Path], typer.Option(
+        parser=output_path, metavar="PATH", help="Write the full report (JSON) here.")] = None,
     rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
     trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
     config: ConfigFile = None,

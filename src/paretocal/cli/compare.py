@@ -10,7 +10,7 @@ import typer
 from ..errors import InputError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose, output_path
 
 
 @app.command()
@@ -23,8 +23,10 @@ def compare(
         help="Dataset folder: also say which of the two its frames prefer.")] = None,
     frames: Frames = None,
     camera: Camera = 2,
-    out: Annotated[Optional[Path], typer.Option(help="Write the comparison (JSON) here.")] = None,
+    out: Annotated[Optional[Path], typer.Option(
+        parser=output_path, metavar="PATH", help="Write the comparison (JSON) here.")] = None,
     page: Annotated[Optional[Path], typer.Option(
+        parser=output_path, metavar="PATH",
         help="With SOURCE: write a page (HTML) showing every frame with both extrinsics' "
              "projections, to judge by eye.")] = None,
     config: ConfigFile = None,

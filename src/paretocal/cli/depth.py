@@ -10,13 +10,14 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, Frames, Quiet
+from .options import Camera, Frames, Quiet, output_path
 
 
 @app.command()
 def depth(
     source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
-    out: Annotated[Path, typer.Option("--out", help="Directory for the depth maps.")],
+    out: Annotated[Path, typer.Option(
+        "--out", parser=output_path, metavar="PATH", help="Directory for the depth maps.")],
     extrinsic: Annotated[Optional[Path], typer.Option(
         help="T_cam_lidar to project with (YAML/JSON); default: the dataset's.")] = None,
     frames: Frames = None,

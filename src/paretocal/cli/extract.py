@@ -10,15 +10,16 @@ import typer
 from ..errors import ParetocalError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Quiet, Verbose
+from .options import Quiet, Verbose, output_path
 
 
 @app.command()
 def extract(
     bag: Annotated[Path, typer.Argument(help="ROS1 .bag, ROS2 .db3 or .mcap file, or rosbag2 "
                                              "folder.")],
-    out: Annotated[Path, typer.Option("--out", help="Folder to create (the generic layout: "
-                                                    "calib.yaml, images/, points/).")],
+    out: Annotated[Path, typer.Option(
+        "--out", parser=output_path,
+        help="Folder to create (the generic layout: calib.yaml, images/, points/).")],
     image_topic: Annotated[Optional[str], typer.Option(
         "--image-topic", help="sensor_msgs/Image or CompressedImage (JPEG, PNG) topic; "
                               "default: the bag's only one.")] = None,

@@ -8,6 +8,16 @@ from typing import Annotated, Optional
 import typer
 
 
+def output_path(text: str) -> Path:
+    """The value of an option that names where to write (``--out``, ``--resume``, ``--page``):
+    an empty one is refused, as ``Path("")`` is the current folder, which would be written
+    into unnoticed (``--out ''`` from an unset shell variable)."""
+    if text == "":
+        raise typer.BadParameter("the path is empty (it would be the current folder; give . if "
+                                 "that is meant)")
+    return Path(text)
+
+
 Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")]
 Force = Annotated[bool, typer.Option(
     "--force", help="Write into --out even when it is a folder of other files (those of the "

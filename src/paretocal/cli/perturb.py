@@ -10,13 +10,14 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import fmt_err
-from .options import Camera
+from .options import Camera, output_path
 
 
 @app.command()
 def perturb(
     source: Annotated[Path, typer.Argument(help="Dataset whose own extrinsic is perturbed.")],
-    out: Annotated[Path, typer.Option("--out", help="YAML file to write (an --init file).")],
+    out: Annotated[Path, typer.Option(
+        "--out", parser=output_path, metavar="PATH", help="YAML file to write (an --init file).")],
     rot: Annotated[float, typer.Option(help="Per-axis rotation bound (+- deg).")] = 5.0,
     trans: Annotated[float, typer.Option(help="Per-axis translation bound (+- m).")] = 0.2,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,

@@ -10,13 +10,14 @@ import typer
 from ..errors import SettingsError
 from . import app
 from ._common import StageProgress, fmt_err, setup_logging
-from .options import CameraOrConfig, ConfigFile, Force, Frames, Quiet, Seed, Verbose
+from .options import CameraOrConfig, ConfigFile, Force, Frames, Quiet, Seed, Verbose, output_path
 
 
 @app.command()
 def study(
     source: Annotated[Path, typer.Argument(help="Dataset folder (any supported layout).")],
-    out: Annotated[Path, typer.Option("--out", help="Directory for the studies and report.html.")],
+    out: Annotated[Path, typer.Option(
+        "--out", parser=output_path, metavar="PATH", help="Directory for the studies and report.html.")],
     init: Annotated[Optional[Path], typer.Option(help="Initial extrinsic (YAML/JSON with "
                                                       "T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
