@@ -421,6 +421,21 @@ def test_each_kind_extracts_the_same_frames(tmp_path, capfd, frames, kind, image
 
 
 @needs_rosbags
+def test_a_rosbag2_metadata_alias_bomb_is_refused(tmp_path, capfd, frames):
+    """A rosbag2 folder whose metadata.yaml starts with a "billion laughs" was read (rosbags'
+    own YAML reader); it is read first by the reader of calib.yaml, which refuses it."""
+    from .test_bad_input import _alias_bomb
+
+    folder = rig_bag(tmp_path, "sqlite3", frames[:1]).parent
+    meta = folder / "metadata.yaml"
+    meta.write_text(_alias_bomb(meta.read_text()))
+    bad(capfd, "extract", folder, "--out", tmp_path / "o", "--image-topic", "/camera/image",
+        "--cloud-topic", "/lidar/points", "--max-dt", "0.05",
+        expect=f"{meta}: its YAML aliases expand it to more than 1,000,000 values")
+    assert not (tmp_path / "o").exists()
+
+
+@needs_rosbags
 def test_other_cloud_layout_and_mono16(tmp_path, capfd, frames):
     """A big-endian organised cloud with time first and 40-byte points, and 16-bit grey images:
     the same fields and the 16-bit pixels come out."""

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import InputError, ParetocalError, SettingsError, first_line, quote
 from .paths import kind_of
+from .text import read_mapping
 from .images import check_image_size, image_header_size
 
 if TYPE_CHECKING:                      # an optional dependency, imported where bags are read
@@ -157,6 +158,10 @@ class Bag:
                                                        ValueError)
         failures: list[BaseException] = []
         for path in tries:
+            if path.is_dir():
+                # rosbags reads metadata.yaml with its own YAML reader, which takes an alias
+                # bomb: the bounded reader of calib.yaml sees it first (and names it).
+                read_mapping(path / "metadata.yaml")
             try:
                 reader = AnyReader([path], default_typestore=store)
                 reader.open()
