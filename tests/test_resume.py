@@ -113,6 +113,32 @@ def test_one_run_per_folder(tmp_path, raw_date, start):
     assert not {".staging", ".lock"} & names and "result.json" in names
 
 
+def test_the_lock_hand_over_leaves_one_holder(tmp_path, monkeypatch):
+    """Run A finishes (removes .lock, unlocks) between run B opening .lock and locking it: B
+    then held a lock on a removed file, and run C a fresh one: two runs in one folder. B now
+    checks after locking that .lock is still the file it locked, and tries again."""
+    import paretocal.rundir as rundir
+
+    run = tmp_path / "run"
+    run.mkdir()
+    a = rundir.locked(run)
+    a.__enter__()
+    real = rundir._open_lock
+
+    def a_leaves_after_b_opens(lock):
+        fd = real(lock)
+        monkeypatch.setattr(rundir, "_open_lock", real)
+        a.__exit__(None, None, None)
+        return fd
+    monkeypatch.setattr(rundir, "_open_lock", a_leaves_after_b_opens)
+    with rundir.locked(run):                                               # B
+        assert (run / ".lock").read_text() == f"pid {os.getpid()}"
+        with pytest.raises(ParetocalError, match="another paretocal run is writing"):
+            with rundir.locked(run):                                       # C
+                pass
+    assert not (run / ".lock").exists()
+
+
 def test_checkpoint_of_another_run_is_refused(tmp_path, start):
     frames, T = start
     ck = Checkpoint(tmp_path / "ck.npz", every=2)

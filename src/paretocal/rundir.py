@@ -12,7 +12,8 @@ the uninterrupted run gives.
 A folder holds one run:
 
 * one process at a time: ``.lock`` is held (``flock``) for the whole run and names the process
-  holding it; a second run into the folder is refused with that name;
+  holding it; a second run into the folder is refused with that name (a run that locked the
+  file just as the holder removed it checks that it is still the folder's, and tries again);
 * nothing is written before the search starts: a run refused for its input (a bad scene, a
   checkpoint of another run) leaves the folder as it was, so an interrupted run in it can still
   be resumed; ``checkpoint_args.json`` is written with the first checkpoint;
@@ -163,6 +164,16 @@ def _open_lock(lock: Path) -> int:
     return fd
 
 
+def _is_file_at(fd: int, path: Path) -> bool:
+    """Whether the open file ``fd`` is the file at ``path`` (not followed through a link)."""
+    try:
+        here = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    mine = os.fstat(fd)
+    return (here.st_dev, here.st_ino) == (mine.st_dev, mine.st_ino)
+
+
 @contextlib.contextmanager
 def locked(out: Path):
     """Hold ``out/.lock`` for the duration (``out`` is created if needed and removed again
@@ -175,27 +186,43 @@ def locked(out: Path):
         return
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    fd = _open_lock(out / LOCK)
+    fd = None
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown"
-            raise ParetocalError(f"{out}: another paretocal run is writing this folder "
-                                 f"({holder}); wait for it to finish or use another --out"
-                                 ) from None
+        fd = _acquire(out, fcntl)
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()}".encode(), 0)
         try:
             yield
         finally:
+            # Removed, then unlocked: a run that opened it meanwhile sees it gone (_acquire).
             (out / LOCK).unlink(missing_ok=True)
             fcntl.flock(fd, fcntl.LOCK_UN)
     finally:
-        os.close(fd)
+        if fd is not None:
+            os.close(fd)
         if created:
             with contextlib.suppress(OSError):
                 out.rmdir()                # only when nothing else was written
+
+
+def _acquire(out: Path, fcntl) -> int:
+    """The descriptor of ``out/.lock``, locked (``flock``) by this process, and still the
+    folder's lock file once locked. Raises :class:`ParetocalError` naming the holder."""
+    while True:
+        fd = _open_lock(out / LOCK)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown"
+            os.close(fd)
+            raise ParetocalError(f"{out}: another paretocal run is writing this folder "
+                                 f"({holder}); wait for it to finish or use another --out"
+                                 ) from None
+        if _is_file_at(fd, out / LOCK):
+            return fd
+        # The holder removed .lock between our opening and our locking it (it removes the
+        # file, then unlocks): the lock held is on a removed file, not the folder's. Again.
+        os.close(fd)
 
 
 def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
