@@ -40,6 +40,34 @@ def _stop_at(generation):
     return progress
 
 
+def test_an_interrupt_in_the_verdicts_restart_names_the_verdict(start, monkeypatch):
+    """Stopped while the verdict's restart searched, a run said "interrupted while the search
+    (after generation 300)": the restart's own search, not the run's. It names the phase as
+    the docs do, with the run's search's front and generation."""
+    from paretocal.errors import Interrupted
+    from paretocal.pipeline import PHASES
+    from paretocal.search.engine import ArrayNSGA2
+
+    frames, T = start
+    verdict = []
+    real = ArrayNSGA2.step
+
+    def step(self, state):
+        if verdict:
+            raise KeyboardInterrupt
+        return real(self, state)
+    monkeypatch.setattr(ArrayNSGA2, "step", step)
+
+    def progress(stage, done, total):
+        if stage == "verdict":
+            verdict.append(stage)
+    with pytest.raises(Interrupted) as info:
+        calibrate(frames, T, SMALL, progress=progress)
+    assert info.value.phase == PHASES["verdict"] == "gathering the verdict's evidence"
+    assert info.value.generation == SMALL.search.gens
+    assert info.value.X.shape[1] == 7 and len(info.value.X) == len(info.value.F)
+
+
 def test_resume_gives_the_uninterrupted_result(tmp_path, start):
     frames, T = start
     whole = calibrate(frames, T, SMALL)

@@ -238,6 +238,12 @@ def _timed(timings: dict[str, float], name: str, progress=None):
     except KeyboardInterrupt:
         STOP.clear()                              # taken
         raise Interrupted(PHASES[name]) from None
+    except Interrupted as exc:
+        # Taken by a step of the phase that names itself (the verdict's restart is a search
+        # of its own): the run stopped in this phase, and the front to show is the run's.
+        if exc.phase == PHASES[name]:
+            raise
+        raise Interrupted(PHASES[name]) from None
     except SystemError:
         # A stop that lands while a compiled function is being dispatched comes out of the
         # call as SystemError ("... returned a result with an exception set"), the interrupt
