@@ -1783,7 +1783,6 @@ def _caught(pid: int) -> int:
         return 0
 
 
-@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
 @pytest.mark.parametrize("command", ["calibrate", "check"])
 def test_a_closed_stdout_ends_the_command_quietly(tmp_path, rig, command):
     """stdout a pipe whose reader is gone (``calibrate ... | true``): the command did its work
@@ -1802,6 +1801,7 @@ def test_a_closed_stdout_ends_the_command_quietly(tmp_path, rig, command):
         assert not {".staging", ".lock"} & names
 
 
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
 @pytest.mark.parametrize("how", ["-m", "console"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])
