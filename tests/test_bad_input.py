@@ -1803,12 +1803,12 @@ def test_a_closed_stdout_ends_the_command_quietly(tmp_path, rig, command):
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
 @pytest.mark.parametrize("how", ["-m", "console"])
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 @pytest.mark.parametrize("delay", [0, 0.02, 0.05, 0.1, 0.2])
 def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, delay):
-    """SIGINT or SIGTERM while the command line starts (it imports typer and click, some
-    0.1 s, before cli.main takes over): one line and exit 130 or 143, no traceback; from then
-    on SIGTERM is a Ctrl-C, as before (exit 130, "interrupted before the run started" or how
+    """SIGINT, SIGTERM or SIGHUP while the command line starts (it imports typer and click,
+    some 0.1 s, before cli.main takes over): one line and exit 130, 143 or 129, no traceback;
+    from then on SIGTERM and SIGHUP are a Ctrl-C, as before (exit 130, "interrupted before the run started" or how
     the run stopped; test_resume.py ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
 
     The delays count from the moment the process catches SIGTERM, i.e. from the first lines
@@ -1833,7 +1833,8 @@ def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, d
     lines = out.strip().splitlines()
     assert "Traceback" not in out and len(lines) == 1, out
     starting = {signal.SIGINT: (130, "paretocal: interrupted while starting; nothing was written"),
-                signal.SIGTERM: (143, "paretocal: terminated while starting; nothing was written")}
+                signal.SIGTERM: (143, "paretocal: terminated while starting; nothing was written"),
+                signal.SIGHUP: (129, "paretocal: hung up while starting; nothing was written")}
     if delay > 0.02 and (proc.returncode, lines[0]) != starting[sig]:
         # The command line took over (after importing typer and click, some 0.1 s): as today.
         assert proc.returncode == 130 and lines[0].startswith("paretocal: interrupted"), out

@@ -244,6 +244,26 @@ def test_sigterm_keeps_checkpoint_and_resume_matches(tmp_path, raw_date):
     assert front(run) == front(ref)
 
 
+def test_sighup_stops_a_run_as_sigterm_does(tmp_path, raw_date):
+    """The terminal closed (SIGHUP) during the search: the run died without a line (it resumed
+    correctly); now it stops as on SIGTERM, one line, the checkpoint kept, exit 130."""
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "paretocal", "calibrate", str(raw_date), "--out", str(run),
+           "--gens", "3000", "--checkpoint-every", "10"] + CLI
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not (run / "checkpoint.npz").exists() and time.time() < deadline:
+        time.sleep(0.05)
+    assert (run / "checkpoint.npz").exists(), proc.communicate()
+    proc.send_signal(signal.SIGHUP)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    (line,) = err.strip().splitlines()
+    assert line.startswith("paretocal: interrupted while the search (after generation ")
+    assert line.endswith(f"continue with: paretocal calibrate --resume {run}")
+    assert (run / "checkpoint.npz").exists() and (run / "partial_front.csv").exists()
+
+
 def test_resume_needs_a_run_directory(tmp_path, capsys):
     assert main(["calibrate", "--resume", str(tmp_path)]) == 2
     assert "run_args.json" in capsys.readouterr().err

@@ -1,9 +1,9 @@
 """``python -m paretocal`` and the ``paretocal`` console script.
 
-The first thing this module does is take over SIGINT and SIGTERM: until the command line
-installs its own handlers (:func:`paretocal.cli.main`, once typer and click are imported, some
-0.1 s later), either signal ends the process at once with one line, exit status 130 (SIGINT)
-or 143 (SIGTERM): nothing has been written yet. Nothing heavy is imported before, and
+The first thing this module does is take over SIGINT, SIGTERM and SIGHUP: until the command
+line installs its own handlers (:func:`paretocal.cli.main`, once typer and click are imported,
+some 0.1 s later), each ends the process at once with one line, exit status 130 (SIGINT), 143
+(SIGTERM) or 129 (SIGHUP): nothing has been written yet. Nothing heavy is imported before, and
 ``paretocal/__init__.py``, which runs first, imports nothing.
 """
 
@@ -13,7 +13,8 @@ except ImportError:             # pragma: no cover - another Python implementati
     import signal
 
 #: Exit status and word of each signal while the command line starts (128 + the signal).
-_STARTING = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated")}
+_STARTING = {signal.SIGINT: (130, "interrupted"), signal.SIGTERM: (143, "terminated"),
+             signal.SIGHUP: (129, "hung up")}
 
 
 def _stop_while_starting(signum, frame):
@@ -38,7 +39,7 @@ import sys  # noqa: E402
 def console() -> None:
     from .cli import main
 
-    # final: SIGINT and SIGTERM stay ignored after the command, so that a Ctrl-C while the
+    # final: SIGINT, SIGTERM and SIGHUP stay ignored after the command, so that a Ctrl-C while the
     # interpreter shuts down (joining threads) prints no traceback; the run has said how it ended.
     status = main(final=True)
     if status == 130:

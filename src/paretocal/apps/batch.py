@@ -647,7 +647,7 @@ def _close(client, cluster) -> None:
 
 @contextlib.contextmanager
 def _deferred_interrupts():
-    """Hold SIGINT and SIGTERM until the block is done, then raise KeyboardInterrupt if one
+    """Hold SIGINT, SIGTERM and SIGHUP until the block is done, then raise KeyboardInterrupt if one
     came: a cluster interrupted while it starts cannot be closed (its workers have no state to
     close from) and Dask reports that with a traceback at exit."""
     import signal
@@ -656,8 +656,10 @@ def _deferred_interrupts():
         yield                                  # signals reach the main thread only
         return
     caught = []
+    # A signal ignored (nohup: SIGHUP) stays ignored.
     previous = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum))
-                for sig in (signal.SIGINT, signal.SIGTERM)}
+                for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+                if signal.getsignal(sig) is not signal.SIG_IGN}
     try:
         yield
     finally:

@@ -23,7 +23,7 @@ import click
 import typer
 
 from ..errors import MESSAGE_CHARS, STOP, ParetocalError, excerpt
-from ._common import STOP_HANDLER, ReaderMayLeave, StageProgress, report
+from ._common import STOP_HANDLER, STOP_SIGNALS, ReaderMayLeave, StageProgress, report
 
 
 #: The application; each command's module registers its command on it (declared with its type
@@ -74,7 +74,7 @@ __all__ = ["BATCH_FAILED_EXIT", "PIPE_EXIT", "STRICT_EXIT", "app", "interrupted_
 #: written) and its errors are said on stderr; a command that failed keeps its own status.
 PIPE_EXIT = 141
 
-#: The SIGINT and SIGTERM handler that :func:`main` installs.
+#: The SIGINT, SIGTERM and SIGHUP handler that :func:`main` installs.
 _STOP = STOP_HANDLER
 #: Names the tests use from when the commands were one module.
 _Progress = StageProgress
@@ -113,7 +113,7 @@ def _interrupted(command: str | None) -> int:
 def main(argv: list[str] | None = None, final: bool = False) -> int:
     """Entry point of the ``paretocal`` console script; returns the exit status.
 
-    ``final``: the process exits right after (the console script): SIGINT and SIGTERM are then
+    ``final``: the process exits right after (the console script): the stop signals are then
     left ignored instead of restored, so a late second Ctrl-C cannot interrupt the exit."""
     import signal
     import threading
@@ -123,11 +123,12 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
     name = next((a for a in args if not a.startswith("-")), None)
     _STOP.signals, _STOP.reported = 0, False
     STOP.clear()
-    # SIGTERM stops a run the way Ctrl-C does: checkpoint kept, partial front written.
+    # SIGTERM and SIGHUP (the terminal closed) stop a run the way Ctrl-C does: checkpoint
+    # kept, partial front written.
     main_thread = threading.current_thread() is threading.main_thread()
     # A signal ignored when the process started (a background job of a shell, nohup) stays
     # ignored, as Python itself does for SIGINT.
-    previous = ({sig: signal.signal(sig, _STOP) for sig in (signal.SIGINT, signal.SIGTERM)
+    previous = ({sig: signal.signal(sig, _STOP) for sig in STOP_SIGNALS
                  if signal.getsignal(sig) is not signal.SIG_IGN} if main_thread else {})
     unraisable, sys.unraisablehook = sys.unraisablehook, _quiet_stops(sys.unraisablehook)
     stdout = sys.stdout = ReaderMayLeave(sys.stdout)

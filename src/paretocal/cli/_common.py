@@ -1,12 +1,13 @@
 """What the commands share besides their options: the logging setup, the progress display on
 stderr, an error against the reference in one phrase, and the line that says how an
-interrupted command ended (with the SIGINT and SIGTERM handler that
+interrupted command ended (with the SIGINT, SIGTERM and SIGHUP handler that
 :func:`paretocal.cli.main` installs)."""
 
 from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
 from typing import Any
 
@@ -140,7 +141,7 @@ def fmt_err(e: dict | None) -> str:
 
 
 class StopHandler:
-    """SIGINT and SIGTERM handler: the first signal raises KeyboardInterrupt (the run stops and
+    """SIGINT, SIGTERM and SIGHUP handler: the first signal raises KeyboardInterrupt (the run stops and
     saves what it has) and records the request (``errors.STOP``: should library code swallow
     the exception, the run stops at its next phase or generation); later signals only say so,
     so that saving is not cut short."""
@@ -160,6 +161,10 @@ class StopHandler:
 
 
 STOP_HANDLER = StopHandler()
+#: The signals that stop a command as Ctrl-C does: SIGINT, SIGTERM and SIGHUP (the terminal
+#: closed), where the system has them.
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                     if hasattr(signal, name))
 
 
 def report(line: str) -> None:
