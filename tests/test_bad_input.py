@@ -1808,8 +1808,9 @@ def test_a_closed_stdout_ends_the_command_quietly(tmp_path, rig, command):
 def test_a_signal_while_starting_prints_one_line(tmp_path, raw_date, how, sig, delay):
     """SIGINT, SIGTERM or SIGHUP while the command line starts (it imports typer and click,
     some 0.1 s, before cli.main takes over): one line and exit 130, 143 or 129, no traceback;
-    from then on SIGTERM and SIGHUP are a Ctrl-C, as before (exit 130, "interrupted before the run started" or how
-    the run stopped; test_resume.py ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
+    from then on SIGTERM and SIGHUP are a Ctrl-C, as before (exit 130, "interrupted before the
+    run started" or how the run stopped; test_resume.py
+    ``test_ctrl_c_at_any_time_prints_one_line_and_no_traceback``).
 
     The delays count from the moment the process catches SIGTERM, i.e. from the first lines
     of paretocal/__main__.py (before them the interpreter starts, about 15 ms of site and
