@@ -203,6 +203,7 @@ def test_interrupted_batch_stops_quietly_and_says_how_far_it_got(raw_date, tmp_p
         os.kill(os.getpid(), signal.SIGTERM)       # cli.main turns it into KeyboardInterrupt
 
     monkeypatch.setattr(cli._Progress, "__call__", terminate)
+    tmp = _own_tmpdir(tmp_path, monkeypatch)
     manifest = tmp_path / "m.yaml"                # one worker runs them in this order
     manifest.write_text(yaml.safe_dump([{"id": "broken", "source": "does/not/exist"},
                                         {"id": "long", "source": str(raw_date)}]))
@@ -231,6 +232,34 @@ def test_interrupted_batch_stops_quietly_and_says_how_far_it_got(raw_date, tmp_p
         assert [(row["id"], row["status"]) for row in csv.DictReader(fh)] == \
             [("broken", "failed")]
     assert not (out / "runs" / "long" / "entry.json").exists()
+    # Dask's scratch of the stopped workers (a worker-*.dirlock) was left in $TMPDIR.
+    assert not list(tmp.iterdir())
+    assert sorted(p.name for p in out.iterdir()) == ["runs", "summary.csv", "summary.parquet"]
+
+
+def _own_tmpdir(tmp_path, monkeypatch):
+    """A $TMPDIR of the test's own (for this process and the workers it starts)."""
+    import tempfile
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    return tmp
+
+
+def test_the_workers_scratch_stays_in_the_batch_folder_and_goes(tmp_path, monkeypatch):
+    """The local cluster's workers kept their scratch in $TMPDIR/dask-scratch-space, outside
+    --out; it is a folder of the batch's own now, removed when the cluster stops."""
+    tmp = _own_tmpdir(tmp_path, monkeypatch)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(yaml.safe_dump([{"id": "broken", "source": "does/not/exist"}]))
+    out = tmp_path / "out"
+    r = run_batch(manifest, out, TINY, workers=1)
+    assert (r["ran"], r["failed"]) == (1, 1)
+    assert not list(tmp.iterdir())
+    assert sorted(p.name for p in out.iterdir()) == ["fleet.png", "runs", "summary.csv",
+                                                      "summary.parquet"]
 
 
 def test_fingerprint_covers_settings_entry_and_init_file(manifest):

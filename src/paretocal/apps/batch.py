@@ -29,6 +29,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import threading
 import time
 from dataclasses import asdict, dataclass
@@ -40,9 +41,12 @@ from ..io.atomic import atomic_path, atomic_write_text
 from ..report.results import dumps
 
 RECORD = "entry.json"
+#: The local cluster's scratch folder (its workers' spill and lock files), inside the batch's
+#: folder while the cluster runs and removed when it stops.
+SCRATCH = ".dask-scratch"
 #: Names a batch folder holds (runs/ from the first task on): the CLI refuses to write a batch
 #: into a non-empty folder holding none of them unless told to (``--force``).
-BATCH_MARKS = ("runs", "summary.csv")
+BATCH_MARKS = ("runs", "summary.csv", SCRATCH)
 log = logging.getLogger(__name__)
 #: An entry's id names its folder: letters, digits, '_', '-' and '.' (matched whole: ``$``
 #: would take a trailing line break).
@@ -606,7 +610,7 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, by_entry: di
     log_level = logging.getLogger("paretocal").getEffectiveLevel()
     futures: dict = {}
     with _deferred_interrupts():
-        client, cluster, threads = _connect(scheduler, workers, log_level)
+        client, cluster, threads = _connect(scheduler, workers, log_level, out / SCRATCH)
     t_run = time.perf_counter()
     try:
         futures = {client.submit(run_entry, e, by_entry[e.id], str(out.resolve()), check,
@@ -633,16 +637,18 @@ def _run_pending(pending: list[Entry], records: dict, prints: dict, by_entry: di
         # the running ones; Dask's account of that (tasks cancelled, workers killed) is noise.
         with _silenced("distributed"):
             client.cancel(list(futures))
-            _close(client, cluster)
+            _close(client, cluster, out / SCRATCH)
         raise
-    _close(client, cluster)
+    _close(client, cluster, out / SCRATCH)
     return time.perf_counter() - t_run
 
 
-def _close(client, cluster) -> None:
+def _close(client, cluster, scratch: Path) -> None:
+    """Close the client and the local cluster, then remove its scratch folder ``scratch``."""
     client.close()
     if cluster is not None:
         cluster.close()
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -682,9 +688,12 @@ def _silenced(name: str):
         logger.setLevel(level)
 
 
-def _connect(scheduler: str | None, workers: int | None, log_level: int):
+def _connect(scheduler: str | None, workers: int | None, log_level: int, scratch: Path):
     """``(client, cluster, kernel threads per task)``; ``cluster`` is the local one started
-    here (None with ``scheduler``)."""
+    here (None with ``scheduler``), its scheduler's and workers' scratch in the folder
+    ``scratch`` (Dask's default is ``$TMPDIR/dask-scratch-space``, outside the batch's folder,
+    where a stopped worker leaves its lock file)."""
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -696,8 +705,12 @@ def _connect(scheduler: str | None, workers: int | None, log_level: int):
     # Dask's own warnings (a worker restarted, a task cancelled) repeat what the records
     # say; they are shown with --verbose only.
     quiet = logging.WARNING if log_level <= logging.INFO else logging.ERROR
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, host="127.0.0.1", silence_logs=quiet)
+    # The scheduler (in this process) takes its folder from Dask's configuration, the workers
+    # from local_directory.
+    with dask.config.set({"temporary-directory": str(scratch)}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, host="127.0.0.1", silence_logs=quiet,
+                               local_directory=str(scratch))
     return Client(cluster), cluster, max(1, (os.cpu_count() or 1) // workers)
 
 
