@@ -476,14 +476,15 @@ def _fits_ring_layout(raw: bytes, lay: BinLayout) -> bool:
 def _read_npy(path: Path, declared: str | None) -> tuple[dict[str, np.ndarray], str | None]:
     """The columns of a ``.npy`` file: a record array's fields or a plain array's columns."""
     arr = _load_npy(path)
-    if arr.dtype.names:
+    fields = arr.dtype.fields
+    if arr.dtype.names and fields is not None:
         if arr.ndim == 0:
             raise InputError(f"{path}: the record array holds a single record, not a cloud")
         arr = arr.reshape(-1)
         wanted = ("x", "y", "z") + INTENSITY_FIELDS + RING_FIELDS + TIME_FIELDS
         cols = {}
-        for name in arr.dtype.names:
-            ft = arr.dtype.fields[name][0]
+        for name in arr.dtype.names or ():
+            ft = fields[name][0]
             if ft.shape or ft.kind not in "iuf":
                 if name.lower() in wanted:
                     raise InputError(f"{path}: field {quote(name)} has type {ft}; expected one real "
