@@ -111,11 +111,24 @@ class CostModel:
 
     @classmethod
     def from_dict(cls, model) -> "CostModel":
-        """The model :meth:`to_dict` wrote, checked to be one a measurement gives: exactly
-        the fields, finite non-negative times and sizes, a point range ``0 <= points_min <=
-        points_max`` and a ``probe`` mapping. Raises ValueError otherwise (a cache file or a
-        checkpoint's copy edited or damaged: a model with ``ms_fixed`` -1000 would model
-        evaluations of -999 ms)."""
+        """The model :meth:`to_dict` wrote, checked to be one a measurement gives.
+
+        Parameters
+        ----------
+        model : dict
+            Exactly the fields: finite non-negative times (ms) and sizes (bytes), a point range
+            ``0 <= points_min <= points_max`` and a ``probe`` mapping.
+
+        Returns
+        -------
+        CostModel
+
+        Raises
+        ------
+        ValueError
+            For anything else (a cache file or a checkpoint's copy edited or damaged: a model
+            with ``ms_fixed`` -1000 would model evaluations of -999 ms).
+        """
         names = {f.name for f in fields(cls)}
         numbers = ("ms_fixed", "ms_per_point", "bytes_fixed", "bytes_per_point")
         ok = (isinstance(model, dict) and set(model) == names
