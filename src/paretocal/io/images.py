@@ -93,8 +93,12 @@ def image_header_size(data) -> tuple[int, int] | None:
     A PNG's size is its first chunk's (IHDR). A JPEG's segments are walked from its start to
     the frame header (SOFn), skipping fill bytes and any number of segments: the walk is
     bounded by the data, not by a count of segments (a compiled walk past the first
-    :data:`_PYTHON_STEPS`: 64 MB of empty comment segments in about 0.1 s)."""
-    buf = np.frombuffer(data.read() if hasattr(data, "read") else data, dtype=np.uint8)
+    :data:`_PYTHON_STEPS`: 64 MB of empty comment segments in about 0.1 s). From a file
+    object a PNG's first 24 bytes are read, a JPEG's whole data."""
+    if hasattr(data, "read"):
+        first = data.read(24)
+        data = first + data.read() if first[:3] == b"\xff\xd8\xff" else first
+    buf = np.frombuffer(data, dtype=np.uint8)
     head = buf[:24].tobytes()
     if head[:8] == _PNG and head[12:16] == b"IHDR" and len(head) == 24:
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
@@ -174,10 +178,11 @@ def check_image_size(where, size: tuple[int, int] | None,
 
 
 def image_size(path: Path) -> tuple[int, int]:
-    """``(width, height)`` of the image at ``path``: from its header (PNG, JPEG), else as
-    decoded. Raises :class:`InputError` as :func:`decode_image` does."""
-    raw = _read_raw(Path(path))
-    size = image_header_size(raw)
+    """``(width, height)`` of the image at ``path``: from its header (PNG: its first 24 bytes;
+    JPEG), else as decoded. Raises :class:`InputError` as :func:`decode_image` does."""
+    path = Path(path)
+    with _image_file(path) as fh:
+        size = image_header_size(fh)
     if size is None:
         img = decode_image(path)
         return img.shape[1], img.shape[0]
@@ -185,17 +190,19 @@ def image_size(path: Path) -> tuple[int, int]:
     return size
 
 
-def _read_raw(path: Path) -> np.ndarray:
-    """The bytes of the image file ``path`` (at most :data:`MAX_IMAGE_BYTES`)."""
+@contextlib.contextmanager
+def _image_file(path: Path):
+    """The image file ``path`` open for reading, once it is known to be a regular file of at
+    most :data:`MAX_IMAGE_BYTES` that is not empty; a failure to read it (inside the block
+    too) is an :class:`InputError` naming it."""
     require_file(path, "image file")
     try:
-        require_size(path, MAX_IMAGE_BYTES, "image file")
-        raw = np.fromfile(path, dtype=np.uint8)
+        if require_size(path, MAX_IMAGE_BYTES, "image file") == 0:
+            raise InputError(f"{path}: the image file is empty (0 bytes)")
+        with open(path, "rb") as fh:
+            yield fh
     except OSError as exc:
         raise InputError(f"{path}: cannot read the image ({exc.strerror or exc})") from None
-    if raw.size == 0:
-        raise InputError(f"{path}: the image file is empty (0 bytes)")
-    return raw
 
 
 def decode_image(path: Path, expected: tuple[int, int] | None = None,
@@ -210,7 +217,12 @@ def decode_image(path: Path, expected: tuple[int, int] | None = None,
     on stderr.
     """
     path = Path(path)
-    raw = _read_raw(path)
+    with _image_file(path) as fh:
+        # A PNG is judged from its first 24 bytes, before the file is read; a JPEG's segments
+        # are walked in the bytes the decoder reads.
+        check_image_size(path, image_header_size(fh.read(24)), expected, what)
+        fh.seek(0)
+        raw = np.fromfile(fh, dtype=np.uint8)
     check_image_size(path, image_header_size(raw.data), expected, what)
     notes: list[str] = []
     with _native_stderr(notes):
