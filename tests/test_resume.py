@@ -457,37 +457,36 @@ def test_the_budget_decision_does_not_follow_the_load(tmp_path, start, monkeypat
     assert loaded.cost_model.ms_per_point == 3e-5 and loaded.n_points < first.n_points
 
 
-def test_a_cost_model_cache_nested_too_deeply_is_measured_again(tmp_path, start, monkeypatch):
-    """A cache file nested 100,000 deep failed every later run of the scene (RecursionError,
-    exit 1) until it was deleted; now it is measured again and the file replaced."""
-    frames, T = start
-    monkeypatch.setenv("PARETOCAL_CACHE_DIR", str(tmp_path / "cache"))
-    _timing(monkeypatch, 1e-5)
-    calibrate(frames, T, BUDGET)
-    (cache,) = (tmp_path / "cache").glob("cost-*.json")
-    cache.write_text("[" * 100_000 + "]" * 100_000)
-    again = calibrate(frames, T, BUDGET)
-    assert again.cost_model.probe["source"] == "measured"
-    assert json.loads(cache.read_text())["ms_per_point"] == 1e-5
+#: Cache files no measurement gives: nested 100,000 deep (every later run of the scene failed
+#: with RecursionError, exit 1, until the file was deleted), and edited figures (ms_fixed -1000
+#: was used: "-1000 ms/eval modelled", objectives.ms -999.99).
+DAMAGED_CACHES = {
+    "nested": lambda text: "[" * 100_000 + "]" * 100_000,
+    "negative time": lambda text: json.dumps(dict(json.loads(text), ms_fixed=-1000.0)),
+    "NaN slope": lambda text: json.dumps(dict(json.loads(text), ms_per_point=float("nan"))),
+    "inverted range": lambda text: json.dumps(dict(json.loads(text), points_min=5,
+                                                   points_max=2)),
+    "no probe": lambda text: json.dumps(dict(json.loads(text), probe=None)),
+}
 
 
-@pytest.mark.parametrize("edit", [{"ms_fixed": -1000.0}, {"ms_per_point": float("nan")},
-                                  {"points_min": 5, "points_max": 2}, {"probe": None}],
-                         ids=["negative time", "NaN slope", "inverted range", "no probe"])
 def test_a_cost_model_cache_that_no_measurement_gives_is_measured_again(tmp_path, start,
-                                                                      monkeypatch, edit):
-    """A cache file edited to ms_fixed -1000 was used ("-1000 ms/eval modelled", objectives.ms
-    -999.99): the cache is checked as the checkpoint's copy is, and measured again."""
+                                                                      monkeypatch):
+    """The cache is checked as the checkpoint's copy is (CostModel.from_dict): a damaged one
+    is measured again and replaced."""
     frames, T = start
+    cheap = Settings().replace(search={"pop": 8, "gens": 1, "seed_grid_deg": None},
+                               decision={"polish": False, "restarts": 0})
     monkeypatch.setenv("PARETOCAL_CACHE_DIR", str(tmp_path / "cache"))
     _timing(monkeypatch, 1e-5)
-    calibrate(frames, T, BUDGET)
+    calibrate(frames[:1], T, cheap)
     (cache,) = (tmp_path / "cache").glob("cost-*.json")
-    cache.write_text(json.dumps(dict(json.loads(cache.read_text()), **edit)))
-    again = calibrate(frames, T, BUDGET)
-    assert again.cost_model.probe["source"] == "measured"
-    assert again.cost_model.ms_fixed == 0.0 and again.objectives()["ms"] > 0
-    assert json.loads(cache.read_text())["ms_fixed"] == 0.0
+    for case, damage in DAMAGED_CACHES.items():
+        cache.write_text(damage(cache.read_text()))
+        again = calibrate(frames[:1], T, cheap)
+        assert again.cost_model.probe["source"] == "measured", case
+        assert again.cost_model.ms_fixed == 0.0 and again.objectives()["ms"] > 0, case
+        assert json.loads(cache.read_text())["ms_per_point"] == 1e-5, case
 
 
 def test_a_resumed_run_decides_with_the_interrupted_runs_cost_model(tmp_path, start,
