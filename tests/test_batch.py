@@ -138,26 +138,31 @@ def test_edited_entries_are_calibrated_again(manifest, first_run, raw_date, tmp_
 
 
 def test_an_edited_record_is_not_taken_for_a_done_entry(manifest, first_run, tmp_path):
-    """runs/<id>/entry.json edited (its extrinsic changed, its fingerprint kept), with its
-    result.json deleted or not: the entry was counted done and the forged extrinsic went into
+    """runs/<id>/entry.json edited (its extrinsic changed, its fingerprint kept), or its
+    result.json deleted: the entry was counted done and the forged extrinsic went into
     summary.csv. A record is done only as written for the run published beside it."""
+    from paretocal.apps.batch import RECORD, read_record
+
     out = tmp_path / "out"
     shutil.copytree(first_run[0], out)
     forged = np.eye(4).tolist()
-    for eid in ("car1_a", "car1_b"):
-        path = out / "runs" / eid / "entry.json"
-        path.write_text(json.dumps(dict(json.loads(path.read_text()), T_cam_lidar=forged)))
-    (out / "runs" / "car1_a" / "result.json").unlink()
+    for eid, edit in (("car1_a", "record"), ("car1_b", "result")):
+        run = out / "runs" / eid
+        assert read_record(run) is not None                   # as written: done
+        if edit == "record":
+            text = json.dumps(dict(json.loads((run / RECORD).read_text()), T_cam_lidar=forged))
+            (run / RECORD).write_text(text)
+        else:
+            (run / "result.json").unlink()
+        assert read_record(run) is None
+    (out / "runs" / "car1_b" / "result.json").write_bytes(
+        (first_run[0] / "runs" / "car1_b" / "result.json").read_bytes())   # car1_b done again
     r = run_batch(manifest, out, TINY, workers=1, check=True)
-    assert (r["ran"], r["skipped"], r["ok"]) == (3, 0, 2)
+    assert (r["ran"], r["skipped"], r["ok"]) == (2, 1, 2)
     with open(out / "summary.csv") as fh:
-        rows = {row["id"]: row for row in csv.DictReader(fh)}
-    for eid in ("car1_a", "car1_b"):
-        T = json.loads((out / "runs" / eid / "result.json").read_text())["T_cam_lidar"]
-        assert float(rows[eid]["T_00"]) == T[0][0] != 1.0
-    # As written, the records are done.
-    again = run_batch(manifest, out, TINY, workers=1, check=True)
-    assert (again["ran"], again["skipped"]) == (1, 2)
+        row = {row["id"]: row for row in csv.DictReader(fh)}["car1_a"]
+    T = json.loads((out / "runs" / "car1_a" / "result.json").read_text())["T_cam_lidar"]
+    assert float(row["T_00"]) == T[0][0] != 1.0
 
 
 def tiny_config(folder):
