@@ -267,6 +267,24 @@ def test_the_workers_scratch_stays_in_the_batch_folder_and_goes(tmp_path, monkey
                                                       "summary.parquet"]
 
 
+def test_a_busy_port_8787_does_not_stop_the_local_cluster(tmp_path):
+    """Dask's scheduler serves HTTP on port 8787 by default, dashboard or not: with the port
+    taken (another Dask on the machine) it warned "Port 8787 is already in use" (an error
+    under the tests' warning filter: the cluster failed to start). It takes a free port."""
+    import socket
+
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(yaml.safe_dump([{"id": "broken", "source": "does/not/exist"}]))
+    with socket.socket() as busy:
+        try:
+            busy.bind(("", 8787))
+            busy.listen()
+        except OSError:
+            pass                                  # taken already: the case itself
+        r = run_batch(manifest, tmp_path / "out", TINY, workers=1)
+    assert (r["ran"], r["failed"]) == (1, 1)
+
+
 def test_fingerprint_covers_settings_entry_and_init_file(manifest):
     (e, _, _) = read_manifest(manifest)
     base = entry_fingerprint(e, TINY.to_dict())

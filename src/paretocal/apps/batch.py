@@ -706,11 +706,15 @@ def _connect(scheduler: str | None, workers: int | None, log_level: int, scratch
     # say; they are shown with --verbose only.
     quiet = logging.WARNING if log_level <= logging.INFO else logging.ERROR
     # The scheduler (in this process) takes its folder from Dask's configuration, the workers
-    # from local_directory.
+    # from local_directory. Without a dashboard it still serves HTTP (health, metrics), on
+    # port 8787 unless told otherwise, and warns when another Dask holds that port: any free
+    # port does.
     with dask.config.set({"temporary-directory": str(scratch)}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, host="127.0.0.1", silence_logs=quiet,
-                               local_directory=str(scratch))
+                               local_directory=str(scratch),
+                               scheduler_kwargs={"dashboard": False,
+                                                 "dashboard_address": "127.0.0.1:0"})
     return Client(cluster), cluster, max(1, (os.cpu_count() or 1) // workers)
 
 
