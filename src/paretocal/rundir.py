@@ -320,8 +320,9 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
         if checkpoint_every > 0:
             ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, args)
         try:
+            # The settings are final here (the dataset's options decided above).
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
-                               lidar=lidar)
+                               lidar=lidar, dataset_options=False)
             try:
                 if progress is not None:
                     progress("writing", 0, 1)

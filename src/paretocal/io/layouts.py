@@ -672,13 +672,18 @@ def _options(cpath: Path, data: dict) -> dict:
     return {"init_error": _init_error(cpath, data["init_error"])}
 
 
-def source_options(source: str | Path | Source) -> dict:
+def source_options(source: str | Path | Source | list[Frame]) -> dict:
     """What a dataset states about itself (:attr:`Source.options`: calib.yaml's
     ``init_error`` as ``(deg, m)``), read from its calib.yaml alone: no frame is listed, so
     nothing is said twice. A source with no calib.yaml (KITTI) states nothing; a rig folder
-    states it for all its cameras."""
+    states it for all its cameras. Frames already loaded state what their source stated
+    (:attr:`Frame.options`), where every frame states the same."""
     if isinstance(source, Source):
         return dict(source.options)
+    if isinstance(source, (list, tuple)):
+        frames = list(source)
+        first = frames[0].options if frames else {}
+        return {k: v for k, v in first.items() if all(f.options.get(k) == v for f in frames)}
     cpath = Path(source) / "calib.yaml"
     if not cpath.is_file():
         return {}
@@ -848,6 +853,9 @@ def load_rig_frames(cameras: list[tuple[str, Source]], frames: str | None = None
 def _read_selected(src: Source, frames: str | None, clouds: dict | None) -> list[Frame]:
     idx = select_frames([f.name for f in src.frames], frames)
     out = [read_frame(src.frames[i], clouds) for i in idx]
+    for f in out:
+        # Carried with the frames, so that calibrating them is calibrating the folder.
+        f.options = {k: v for k, v in src.options.items() if k == "init_error"}
     # The readers note what they could not find (no intensity field, an odd time unit) per
     # file; say each thing once per source.
     notes: dict[str, Path] = {}
