@@ -20,7 +20,7 @@ import pytest
 from paretocal import Settings, calibrate
 from paretocal.camera import Camera, project
 from paretocal.geometry import correction_matrix
-from paretocal.report.results import write_run
+from paretocal.report.results import write_outputs
 from paretocal.report.interactive import (DEPTH_PERCENTILES, MAX_IMAGE_WIDTH, dequantise_xyz,
                                           frame_scores, lidar_layer, page_data,
                                           quantise_xyz, write_interactive)
@@ -39,7 +39,7 @@ def run(raw_frames, tmp_path_factory):
     settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
     result = calibrate(frames, T_init, settings)
     out = tmp_path_factory.mktemp("interactive_run")
-    written = write_run(result, out, frames)
+    written = write_outputs(result, out, frames)
     assert out / "interactive.html" in written
     return result, frames, out
 

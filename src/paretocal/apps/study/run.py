@@ -33,7 +33,7 @@ from ...errors import InputError, ParetocalError
 from ...geometry import pose_error
 from ...io.atomic import atomic_write_text
 from ...io.layouts import load_frames, source_options
-from ...report.results import dumps, write_run
+from ...report.results import dumps, write_outputs
 from ...search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends
@@ -172,7 +172,7 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None,  # noqa: PLR091
     result = calibrate(frames, T_arg, settings, dataset_options=False,
                        progress=(lambda s, d, t: progress(f"calibration: {s}", d, t))
                        if progress else None)
-    write_run(result, out / "calibration", frames)
+    write_outputs(result, out / "calibration", frames)
     timings["calibration"] = time.perf_counter() - t0
     tick("pareto_front")
     obj, nsga_front = result.objective, result.nsga_front
