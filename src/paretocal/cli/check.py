@@ -60,10 +60,12 @@ def check(
     if out is not None:
         atomic_write_text(out, json.dumps(r.to_dict(), indent=2) + "\n")
     which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
-    typer.echo(f"paretocal: {which}: {r.verdict.upper()} (score {r.score:.2f}; the local "
+    judged = r.verdict.upper() + (", but the frames are too few to judge (WEAK CHECK below)"
+                                  if r.too_few else "")
+    typer.echo(f"paretocal: {which}: {judged}; score {r.score:.2f} ({r.SCORE}): the local "
                f"optimum is {r.moved_deg:.3f} deg / {100 * r.moved_m:.2f} cm / "
                f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
-               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
+               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better")
     typer.echo(f"paretocal: {features_line(r.features)}")
     if r.motion is not None:
         typer.echo(f"paretocal: {motion_line(r.motion)}")
