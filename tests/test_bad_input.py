@@ -349,7 +349,15 @@ def test_two_files_for_one_frame_are_named(capfd, tmp_path, rig, raw_frames, fol
 
 
 @pytest.mark.parametrize("spec, expect", [
-    ("5:9", "--frames 5:9: selects no frame (the source has 3)"),
+    ("3:", "--frames 3:: selects no frame (the source has 3)"),
+    # A slice beyond the frames is refused as an index beyond them is (issue 45: 0:50 of 10
+    # frames silently took 10).
+    ("0:50", "--frames 0:50: '0:50' reaches index 50, beyond the source's 3 frames (indices 0 "
+             "to 2); 0:3 ends at the last one"),
+    ("5:9", "--frames 5:9: '5:9' reaches index 5, beyond the source's 3 frames"),
+    ("1:9:2", "--frames 1:9:2: '1:9:2' reaches index 9, beyond the source's 3 frames (indices "
+              "0 to 2); 1:3:2 ends at the last one"),
+    ("99", "--frames 99: index 99 is out of range (the source has 3 frames)"),
     (",", "--frames ,: selects no frame"),
     ("0:3:0", "--frames 0:3:0: the step of '0:3:0' is zero"),
     ("abc", "--frames abc: 'abc' is neither a frame stem nor an index"),

@@ -10,7 +10,7 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, ConfigFile, Frames, Quiet, Verbose
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose, one_camera
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..crosscheck import MotionAgreement
@@ -23,10 +23,16 @@ def check(
     extrinsic: Annotated[Optional[Path], typer.Option(
         help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
-    camera: Camera = 2,
+    camera: Camera = None,
     out: Annotated[Optional[Path], typer.Option(help="Write the full report (JSON) here.")] = None,
-    rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
-    trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
+    rot_tol: Annotated[float, typer.Option(
+        "--rot-tol-deg", "--rot-tol", help="Rotation tolerance (deg; default 0.5).")] = 0.5,
+    trans_tol_m: Annotated[Optional[float], typer.Option(
+        "--trans-tol-m", help="Translation tolerance (m; default 0.05), in metres as every "
+                              "length on the command line.")] = None,
+    trans_tol_cm: Annotated[Optional[float], typer.Option(
+        "--trans-tol", help="Deprecated: the translation tolerance in cm; use --trans-tol-m.")
+    ] = None,
     config: ConfigFile = None,
     verbose: Verbose = False,
     quiet: Quiet = False,
@@ -41,14 +47,16 @@ def check(
     from ..io.atomic import atomic_write_text, check_output_file
 
     setup_logging(verbose, quiet)
+    trans_tol = _translation_tolerance_cm(trans_tol_m, trans_tol_cm)
     if rot_tol <= 0 or trans_tol <= 0:
-        raise SettingsError("--rot-tol and --trans-tol must be positive")
+        raise SettingsError("--rot-tol-deg and --trans-tol-m must be positive")
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
     from ..io import read_init
-    T = read_init(extrinsic, source, camera) if extrinsic is not None else None
-    loaded = load_frames(source, frames, camera)
+    src, index = one_camera(source, camera)
+    T = read_init(extrinsic, src, index) if extrinsic is not None else None
+    loaded = load_frames(src, frames, index)
     if T is None:
         T = loaded[0].T_ref
         if T is None:
@@ -71,6 +79,22 @@ def check(
         typer.echo(f"paretocal: {motion_line(r.motion)}")
     for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
+
+
+def _translation_tolerance_cm(metres: float | None, cm: float | None) -> float:
+    """The translation tolerance (cm, as the library takes it) from ``--trans-tol-m`` or the
+    deprecated ``--trans-tol`` (cm), which still works and says so."""
+    import logging
+
+    if metres is not None and cm is not None:
+        raise SettingsError("--trans-tol (cm, deprecated) and --trans-tol-m both given; "
+                            "keep --trans-tol-m")
+    if cm is not None:
+        logging.getLogger("paretocal").warning(
+            "--trans-tol is in cm and deprecated: use --trans-tol-m %g (metres, as every "
+            "length on the command line)", cm / 100.0)
+        return float(cm)
+    return 5.0 if metres is None else 100.0 * float(metres)
 
 
 def features_line(features: FeatureCounts) -> str:
