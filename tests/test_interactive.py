@@ -157,7 +157,7 @@ class TestPage:
         assert banner and "UNRELIABLE" in banner.group(1)
         assert banner.group(1).count("<li>") == len(result.reliability.reasons)
         assert "only 2 frame(s)" in banner.group(1)
-        assert "95 % intervals" not in banner.group(1)              # none for an unreliable result
+        assert "95 % intervals per axis" not in banner.group(1)     # none for an unreliable result
 
     def test_self_contained(self, run):
         _, _, out = run
