@@ -445,6 +445,31 @@ def test_relative_links_resolve(path):
     assert not bad, f"{path.relative_to(ROOT)}:\n" + "\n".join(bad)
 
 
+#: A wall time in prose that a user will hold their own against: "about 15 s", "8 min 19 s",
+#: "about 11 minutes".
+WALL_TIME = re.compile(r"\babout \d+(?:\.\d+)? ?(?:s|min|minutes)\b(?! of CPU)|\b\d+ min \d+ s\b")
+#: The pages whose wall times say where they were measured and what a first run adds.
+TIMED_PAGES = (README, DOCS / "getting-started.md", DOCS / "testing.md")
+
+
+def paragraphs(text: str) -> list[str]:
+    """The prose paragraphs of a Markdown text (fenced blocks and inline code left out), each
+    on one line."""
+    return [" ".join(p.split()) for p in re.split(r"\n\s*\n", prose(text)) if p.strip()]
+
+
+@pytest.mark.parametrize("page", TIMED_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_wall_times_say_where_they_were_measured(page):
+    """A paragraph that gives how long the set-up, the demo or the tests take names the
+    machine (its vCPUs) and its load (nothing else running, or the load average), and what a
+    first run adds (issue 45: "about 15 s on two cores" and "about 11 minutes" said neither)."""
+    bad = [p[:100] for p in paragraphs(page.read_text()) if WALL_TIME.search(p) and not (
+        "vCPU" in p and ("nothing else running" in p or "load average" in p)
+        and "first run" in p)]
+    assert not bad, f"{page.relative_to(ROOT)}: a wall time without its conditions:\n" + \
+        "\n".join(bad)
+
+
 def test_readme_links_into_the_docs_without_anchors():
     """GitHub and MkDocs make different anchors of the same heading: the README links pages."""
     links = [t for t in LINK.findall(prose(README.read_text())) if t.startswith("docs/")]
