@@ -59,7 +59,7 @@ def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_
     r = calibrate(raw_frames[:1], T, Settings().replace(search={"pop": 12, "gens": 2},
                                                          decision={"polish": False}))
     out = tmp_path / "run"
-    results.write_run(r, out, raw_frames[:1], figures=False)
+    results.write_outputs(r, out, raw_frames[:1], figures=False)
     before = (out / "result.json").read_text()
 
     def broken(*a, **k):
@@ -68,7 +68,7 @@ def test_write_run_failure_leaves_previous_run_whole(tmp_path, monkeypatch, raw_
     monkeypatch.setattr(results, "write_extrinsic", broken)
     r.wall_s += 1.0                        # the new result.json differs from the old one
     with pytest.raises(OSError):
-        results.write_run(r, out, raw_frames[:1], figures=False)
+        results.write_outputs(r, out, raw_frames[:1], figures=False)
     # result.json was replaced whole (new) or not at all; nothing half-written anywhere.
     text = (out / "result.json").read_text()
     assert text == before or json.loads(text)["wall_s"] == pytest.approx(r.wall_s, abs=1e-3)
@@ -91,3 +91,39 @@ def test_other_os_errors_stay_bugs(tmp_path):
         with atomic_path(tmp_path / "x.csv"):
             raise OSError(errno.EIO, os.strerror(errno.EIO))
     assert not isinstance(err.value, InputError) and err.value.errno == errno.EIO
+
+
+def test_write_run_into_a_used_folder_replaces_the_run_whole(tmp_path, raw_date, raw_frames,
+                                                             capfd):
+    """``paretocal.write_run`` into a folder a command-line run wrote replaces that run whole
+    (issue 45: its run_args.json and .outputs stayed beside the new result, two runs mixed);
+    a folder of other files is refused as ``--out`` refuses it, unless ``force``."""
+    import json
+
+    from paretocal import Settings, calibrate, write_run
+    from paretocal.errors import SettingsError
+
+    from .helpers import run_cli
+
+    out = tmp_path / "run"
+    code, _, err = run_cli(capfd, "calibrate", raw_date, "--frames", "0:1", "--pop", 12,
+                           "--gens", 2, "--no-polish", "--no-figures", "--quiet", "--out", out)
+    assert code == 0, err
+    assert (out / "run_args.json").exists()
+    r = calibrate(raw_frames[:1], settings=Settings().replace(
+        search={"pop": 12, "gens": 2, "seed": 5}, decision={"polish": False}))
+    written = write_run(r, out, raw_frames[:1], figures=False)
+    assert json.loads((out / "result.json").read_text())["seed"] == 5
+    assert not (out / "run_args.json").exists()           # the command line's run is gone
+    listed = (out / ".outputs").read_text().split()
+    assert sorted(listed) == sorted(p.name for p in written)
+    assert {p.name for p in out.iterdir()} == set(listed) | {".outputs"}
+    # A folder of the user's own files: refused, naming how to write there all the same.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine\n")
+    with pytest.raises(SettingsError, match=r"not a paretocal run folder .* pass force=True"):
+        write_run(r, mine, figures=False)
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    write_run(r, mine, figures=False, force=True)
+    assert (mine / "notes.txt").exists() and (mine / "result.json").exists()

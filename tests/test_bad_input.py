@@ -353,7 +353,15 @@ def test_two_files_for_one_frame_are_named(capfd, tmp_path, rig, raw_frames, fol
 
 
 @pytest.mark.parametrize("spec, expect", [
-    ("5:9", "--frames 5:9: selects no frame (the source has 3)"),
+    ("3:", "--frames 3:: selects no frame (the source has 3)"),
+    # A slice beyond the frames is refused as an index beyond them is (issue 45: 0:50 of 10
+    # frames silently took 10).
+    ("0:50", "--frames 0:50: '0:50' reaches index 50, beyond the source's 3 frames (indices 0 "
+             "to 2); 0:3 ends at the last one"),
+    ("5:9", "--frames 5:9: '5:9' reaches index 5, beyond the source's 3 frames"),
+    ("1:9:2", "--frames 1:9:2: '1:9:2' reaches index 9, beyond the source's 3 frames (indices "
+              "0 to 2); 1:3:2 ends at the last one"),
+    ("99", "--frames 99: index 99 is out of range (the source has 3 frames)"),
     (",", "--frames ,: selects no frame"),
     ("0:3:0", "--frames 0:3:0: the step of '0:3:0' is zero"),
     ("abc", "--frames abc: 'abc' is neither a frame stem nor an index"),
@@ -986,6 +994,29 @@ def _fake_result(**over):
      "with about 2 m)"),
     ({"evidence": {"motion": {"applied": False, "reason": "the motion gives 1 direction(s)"}}},
      None),
+    # A search stopped short of its optimum: a local polish moves the result beyond the
+    # intervals the data give about the optimum (half-widths include the move: y 13.8 cm =
+    # 3.6 about the optimum + 10.2 moved).
+    ({"evidence": {"intervals": {"units": {"y": "cm", "yaw": "deg"},
+                                 "half_width": {"y": 13.8, "yaw": 0.83}, "undetermined": [],
+                                 "move": {"y": 10.2, "yaw": 0.62}},
+                   "move": {"separation_deg": 0.85, "separation_cm": 12.6, "px": 4.6,
+                            "polished": False}}},
+     "the search stopped short of the objective's optimum: a local polish from the result "
+     "moves it 0.85 deg / 13 cm (4.6 px), beyond the 95 % intervals the frames give about "
+     "that optimum (y 10 cm against +-3.6, yaw 0.62 deg against +-0.21); run again with the "
+     "polish (without --no-polish) or a longer search"),
+    ({"evidence": {"intervals": {"units": {"y": "cm"}, "half_width": {"y": 5.0},
+                                 "undetermined": [], "move": {"y": 3.0}},
+                   "move": {"separation_deg": 0.1, "separation_cm": 3.0, "px": 2.0,
+                            "polished": True}}},
+     "moves it 0.1 deg / 3 cm (2 px), beyond the 95 % intervals the frames give about that "
+     "optimum (y 3 cm against +-2); run again with a longer search"),
+    # ... within them: the intervals include the move, the verdict stays ok.
+    ({"evidence": {"intervals": {"units": {"y": "cm"}, "half_width": {"y": 4.8},
+                                 "undetermined": [], "move": {"y": 0.7}},
+                   "move": {"separation_deg": 0.04, "separation_cm": 0.7, "px": 0.4,
+                            "polished": True}}}, None),
 ])
 def test_reliability_reasons(over, reason):
     from paretocal.verdict import reliability

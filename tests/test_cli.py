@@ -142,6 +142,25 @@ class TestCalibrate:
         assert main([]) == 2                        # the help, and no empty error line
         assert "error" not in capsys.readouterr().err
 
+    def test_help_shows_flags_without_a_value_and_the_search_defaults(self, capsys,
+                                                                      monkeypatch):
+        """A flag takes no value: no ``<bool>`` beside ``--version``, ``--help`` or any
+        other flag; ``--pop`` and ``--gens`` name their defaults (issue 45)."""
+        from paretocal.config import SearchSettings
+
+        monkeypatch.setenv("COLUMNS", "200")          # each option's help on one line
+        for args in (["--help"], ["calibrate", "--help"], ["check", "-h"], ["batch", "-h"]):
+            assert main(args) == 0
+            text = capsys.readouterr().out
+            assert "<bool>" not in text, (args, text)
+        assert main(["calibrate", "--help"]) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        s = SearchSettings()
+        assert f"Population size (default {s.pop}" in text
+        assert f"Generations (default {s.gens}" in text
+        # The help option keeps both its names.
+        assert main(["check", "-h"]) == 0 and "--help" in capsys.readouterr().out
+
     def test_console_script(self, tmp_path):
         exe = shutil.which("paretocal", path=str(__import__("pathlib").Path(sys.executable).parent))
         assert exe, "console script not installed"
@@ -245,6 +264,25 @@ class TestCheck:
         assert doc["extrinsic_from"] == "dataset"
         np.testing.assert_array_equal(doc["T_checked"], detect_source(raw_date).frames[0].T_ref)
         assert stdout.startswith("paretocal: the dataset's own extrinsic: ")
+
+    def test_check_takes_its_tolerance_in_metres(self, tmp_path, raw_date, capsys):
+        """``--trans-tol-m`` in metres, as every length on the command line; the old
+        ``--trans-tol`` (cm) still works and says it is deprecated; both at once refused."""
+        docs = {}
+        for name, args in (("m", ["--trans-tol-m", "0.07"]), ("cm", ["--trans-tol", "7"])):
+            out = tmp_path / f"{name}.json"
+            code, stdout, err = _run(capsys, "check", raw_date, "--frames", "0:2", "--out", out,
+                                     "--rot-tol-deg", "0.6", *args)
+            assert code == 0, err
+            docs[name] = json.loads(out.read_text())
+            assert "tolerances 0.6 deg / 7 cm" in stdout
+            deprecated = "--trans-tol is in cm and deprecated: use --trans-tol-m 0.07"
+            assert (deprecated in err) == (name == "cm"), err
+        assert docs["m"]["tolerances"] == docs["cm"]["tolerances"] == {
+            "rotation_deg": 0.6, "translation_cm": 7.0}
+        code, _, err = _run(capsys, "check", raw_date, "--trans-tol", "7", "--trans-tol-m",
+                            "0.07")
+        assert code == 2 and "--trans-tol (cm, deprecated) and --trans-tol-m both given" in err
 
     def test_missing_extrinsic_file(self, tmp_path, raw_date, capsys):
         code, _, err = _run(capsys, "check", raw_date, "--extrinsic", tmp_path / "none.yaml")

@@ -94,6 +94,20 @@ def test_the_tolerance_follows_the_pairs():
     assert motion_tolerance_deg(float("nan")) == MIN_BAND_DEG
 
 
+def test_the_motions_angle_is_known_to_its_vectors_scatter():
+    """The 95 % spread of the angle: residual / sqrt(2 k - p) per observed axis, times
+    sqrt(chi2_p(0.95)); three directions that disagree by 0.56 deg (KITTI frames 1 to 6):
+    +-0.68 deg, shrinking with more vectors; nothing without a fit."""
+    three = MotionAgreement(True, directions=3, residual_deg=0.556, change_deg=1.51,
+                            tolerance_deg=1.5)
+    assert three.spread_deg == pytest.approx(2.4477 * 0.556 / 2.0, rel=1e-3)
+    nine = MotionAgreement(True, directions=9, residual_deg=0.556)
+    assert nine.spread_deg == pytest.approx(three.spread_deg / 2)          # sqrt(4 / 16)
+    turning = MotionAgreement(True, directions=3, turns=2, residual_deg=0.556)
+    assert turning.spread_deg == pytest.approx(2.7955 * 0.556 / np.sqrt(7), rel=1e-3)
+    assert np.isnan(MotionAgreement(False, reason="one pair").spread_deg)
+
+
 def test_too_few_frames_are_refused(raw_frames):
     with pytest.raises(ValueError, match="at least 3 frames"):
         recording_motion(raw_frames[:2])

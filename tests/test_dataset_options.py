@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from paretocal import Settings, calibrate, calibrate_run, resume_run
+from paretocal import Settings, calibrate, calibrate_run, load_frames, resume_run
 from paretocal.config import dataset_settings, states_init_error
 from paretocal.io import source_options
 
@@ -64,8 +64,32 @@ def test_library_calibrate_of_a_folder(folder, raw_frames):
     assert _used(calibrate(folder, settings=TINY).settings) == STATED
     mine = TINY.replace(search={"init_error_deg": 5.0, "init_error_m": 0.2})
     assert _used(calibrate(folder, settings=mine).settings) == (5.0, 0.2)
-    # Frames already loaded carry no calib.yaml: the settings as given.
+    # Frames loaded from the folder carry what it states: calibrating them is calibrating it.
+    loaded = load_frames(folder)
+    assert source_options(loaded) == {"init_error": STATED}
+    assert _used(calibrate(loaded, settings=TINY).settings) == STATED
+    assert _used(calibrate(loaded, settings=mine).settings) == (5.0, 0.2)
+    assert _used(calibrate(loaded, settings=TINY, dataset_options=False).settings) == DEFAULT
+    # KITTI states nothing: the settings as given.
+    assert source_options(raw_frames[:1]) == {}
     assert _used(calibrate(raw_frames[:1], settings=TINY).settings) == DEFAULT
+
+
+def test_the_library_on_loaded_frames_is_the_command_line(folder, tmp_path, capfd):
+    """README's snippet, ``calibrate(load_frames(folder))``, and ``paretocal calibrate
+    folder`` with the same settings and seed give the same result (issue 45: the snippet
+    searched a 10 deg / 0.3 m box where the command line searched calib.yaml's 5 deg /
+    0.2 m, and ended elsewhere)."""
+    settings = Settings().replace(search={"pop": 12, "gens": 2}, decision={"polish": False})
+    result = calibrate(load_frames(folder), settings=settings)
+    code, _, err = run_cli(capfd, "calibrate", folder, "--out", tmp_path / "a", *CLI_TINY)
+    assert code == 0, err
+    doc = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert doc["config"] == json.loads(json.dumps(result.settings.to_dict()))
+    assert _used(doc["config"]) == STATED
+    np.testing.assert_array_equal(np.array(doc["T_cam_lidar"]), result.T_cam_lidar)
+    assert doc["n_points"] == result.n_points
+    assert doc["reliability"]["verdict"] == result.reliability.verdict
 
 
 def test_calibrate_run_records_what_it_used_and_resumes_with_it(folder, tmp_path):

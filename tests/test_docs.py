@@ -2,12 +2,20 @@
 
 * The site builds with ``mkdocs build --strict``: a broken link or anchor, a page left out of
   the navigation or a docstring the API reference cannot parse fails the build.
-* Every fenced ``bash`` block of a page whose first line is ``# runs on the sample data`` is
-  run, block after block in one folder per page, as a user would run it from a clone: the
-  folder holds ``.venv/bin/paretocal`` (the package under test) and ``../shared/data`` (the
-  sample data). Each block must exit 0 and leave every file or folder its commands name with
-  ``--out``. A first line going on with ``; the docs test adds OPTIONS to paretocal COMMAND``
-  has those options added to that command (a shortcut the page states where it shows it).
+* Every code block of README.md and the pages runs in the tests or says why not: a fenced
+  ``bash`` or ``python`` block begins ``# runs on the sample data`` or ``# not run by the
+  tests: REASON``; a ``yaml`` block parses; a ``text`` block (output, layouts, synopses) holds
+  no command but a synopsis (with a placeholder such as ``SOURCE`` or an optional ``[--x]``);
+  no block is left without its language or indented instead of fenced.
+* The blocks marked to run are run, block after block in one folder per page, as a user would
+  run them from a clone: the folder holds ``.venv/bin/paretocal`` and ``.venv/bin/python``
+  (the package under test) and ``../shared/data`` (the sample data). Each block must exit 0
+  and leave every file or folder its commands name with ``--out``. A first line going on with
+  ``; the docs test adds OPTIONS to paretocal COMMAND`` has those options added to that
+  command (a shortcut the page states where it shows it); in a ``python`` block, ``; the docs
+  test adds OPTIONS to calibrate()`` (and ``calibrate_run()``) calls those functions with the
+  settings the same options give (``--frames``, ``--pop``, ``--gens``, ``--no-polish``).
+* README's Python snippet gives the result of the command line before it on the same folder.
 * "Getting started" shows what ``make demo`` runs; README.md has at most 200 lines; every
   relative link of the README and of the pages resolves (file and heading).
 * The API reference documents every public name, and every function and class it shows
@@ -22,6 +30,7 @@ from __future__ import annotations
 
 import ast
 import importlib.util
+import json
 import os
 import re
 import shlex
@@ -39,6 +48,17 @@ README = ROOT / "README.md"
 
 MARK = "# runs on the sample data"
 ADDS = re.compile(r"; the docs test adds (?P<opts>.+?) to paretocal (?P<cmd>[\w-]+)\s*$")
+#: A code block that is not run says why.
+NOT_RUN = re.compile(r"^# not run by the tests: \S")
+#: ... in a Python block: the functions whose settings the options change.
+PY_ADDS = re.compile(r"; the docs test adds (?P<opts>.+?) to (?P<calls>\w+\(\)(?: and \w+\(\))*)\s*$")
+#: Blocks of code, which run or say why not.
+CODE = ("bash", "python")
+#: A line of a text block that is a command (after any ``NAME=value`` prefixes) ...
+COMMAND = re.compile(r"^(?:[A-Z_]+=\S+\s+)*(?:\.venv/bin/|paretocal |make |pip |python|cd |"
+                     r"mkdir |cp |cat )")
+#: ... unless it is a synopsis: a placeholder (SOURCE, RUN_DIR) or an optional option.
+SYNOPSIS = re.compile(r"\b[A-Z][A-Z_]*[A-Z]\b(?!=)|\[--")
 #: Pages whose commands must run on the sample data (the issue's "done when").
 REQUIRED_PAGES = ("getting-started.md", "preparing-data.md")
 #: Pages whose commands take longer (a check of 20 frames, a Dask cluster): marked slow.
@@ -80,6 +100,82 @@ def sample_data_blocks(page: Path) -> list[list[str]]:
             if info == "bash" and lines and lines[0].startswith(MARK)]
 
 
+def runnable_blocks(page: Path) -> list[tuple[str, list[str]]]:
+    """The page's ``bash`` and ``python`` blocks marked to run, in order: ``(info, lines)``."""
+    return [(info, lines) for info, lines in fenced_blocks(page.read_text())
+            if info in CODE and lines and lines[0].startswith(MARK)]
+
+
+def indented_code(text: str) -> list[str]:
+    """Lines that open an indented code block (four spaces after a blank line, outside a
+    fence and not a list's nested item)."""
+    found, fence, prev = [], False, ""
+    for line in text.splitlines():
+        if line.strip().startswith("```"):
+            fence = not fence
+        elif (not fence and not prev.strip() and line.startswith("    ") and line.strip()
+              and not re.match(r"\s*([-*+]|\d+\.)\s", line)):
+            found.append(line)
+        prev = line
+    return found
+
+
+def block_problems(path: Path) -> list[str]:
+    """What keeps the code blocks of a Markdown file from running in the tests or saying why
+    not (the module docstring's rules)."""
+    import yaml
+
+    bad = [f"an indented code block (fence it): {line.strip()[:60]}"
+           for line in indented_code(path.read_text())]
+    for k, (info, lines) in enumerate(fenced_blocks(path.read_text()), 1):
+        first = lines[0] if lines else ""
+        where = f"block {k} ({info or 'no language'})"
+        if not info:
+            bad.append(f"{where}: name its language (text for output and diagrams)")
+        elif info in CODE:
+            if not (first.startswith(MARK) or NOT_RUN.match(first)):
+                bad.append(f"{where}: begin it with {MARK!r} or '# not run by the tests: "
+                           "REASON'")
+            elif info == "python" and first.startswith(MARK) and "docs test adds" in first \
+                    and not PY_ADDS.search(first):
+                bad.append(f"{where}: a Python block's shortcut names calibrate() (and "
+                           "calibrate_run())")
+        elif info == "yaml":
+            try:
+                yaml.safe_load("\n".join(lines))
+            except yaml.YAMLError as exc:
+                bad.append(f"{where}: not YAML ({' '.join(str(exc).split())[:80]})")
+        elif info == "text":
+            bad += [f"{where}: a command in a text block (make it a bash block that runs or "
+                    f"says why not): {line.strip()[:60]}"
+                    for line in shell_lines(lines)
+                    if COMMAND.match(line.strip())
+                    and not SYNOPSIS.search(line.split(" #")[0])]
+    return bad
+
+
+@pytest.mark.parametrize("path", [README] + sorted(DOCS.rglob("*.md")),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_code_block_runs_or_says_why_not(path):
+    bad = block_problems(path)
+    assert not bad, f"{path.relative_to(ROOT)}:\n" + "\n".join(bad)
+
+
+def test_the_rules_for_code_blocks(tmp_path):
+    page = tmp_path / "p.md"
+    page.write_text("Text.\n\n    make demo\n\n```\nx\n```\n\n```bash\nls\n```\n\n"
+                    "```python\n# not run by the tests: a reason\nimport x\n```\n\n"
+                    "```yaml\na: [1\n```\n\n```text\n.venv/bin/paretocal check SOURCE\n"
+                    "pip install 'paretocal[bags]'   # no ROS needed\nparetocal: output\n```\n\n"
+                    "- a list\n\n"
+                    "    - nested\n")
+    bad = block_problems(page)
+    assert [b.split(":")[0] for b in bad] == [
+        "an indented code block (fence it)", "block 1 (no language)", "block 2 (bash)",
+        "block 4 (yaml)", "block 5 (text)"], bad
+    assert "pip install" in bad[-1]
+
+
 def shell_lines(lines: list[str]) -> list[str]:
     """The block's lines with backslash continuations joined."""
     out, cur = [], ""
@@ -117,7 +213,7 @@ def outputs(lines: list[str]) -> list[str]:
 
 
 def pages_with_commands() -> list:
-    pages = sorted(p.name for p in DOCS.glob("*.md") if sample_data_blocks(p))
+    pages = sorted(p.name for p in DOCS.glob("*.md") if runnable_blocks(p))
     return [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_PAGES else name
             for name in pages]
 
@@ -145,32 +241,120 @@ def clone(tmp_path, data):
     return work
 
 
-def run_block(lines: list[str], cwd: Path) -> subprocess.CompletedProcess:
+#: How a Python block runs: ``python RUNNER BLOCK [OPTIONS]``, the options of its shortcut
+#: given to ``paretocal.calibrate`` and ``calibrate_run`` as the settings they mean.
+PY_RUNNER = '''
+import dataclasses, runpy, sys
+from pathlib import Path
+
+import paretocal
+from paretocal.io import select_frames
+
+block, opts = sys.argv[1], sys.argv[2:]
+spec, search, decision = None, {}, {}
+while opts:
+    name = opts.pop(0)
+    if name == "--no-polish":
+        decision["polish"] = False
+    elif name in ("--pop", "--gens"):
+        search[name[2:]] = int(opts.pop(0))
+    elif name == "--frames":
+        spec = opts.pop(0)
+    else:
+        sys.exit(f"the docs test does not know {name}")
+
+
+def quick(settings, path):
+    s = (settings or paretocal.Settings()).replace(search=search, decision=decision)
+    return dataclasses.replace(s, frames=spec) if spec is not None and path else s
+
+
+def shortcut(function, at):
+    # at: the position of the settings among the arguments after the source
+    def call(source, *args, **kwargs):
+        args = list(args)
+        path = isinstance(source, (str, Path))
+        if len(args) > at:
+            args[at] = quick(args[at], path)
+        else:
+            kwargs["settings"] = quick(kwargs.get("settings"), path)
+        if spec is not None and not path:
+            source = [source[i] for i in select_frames([f.name for f in source], spec)]
+        return function(source, *args, **kwargs)
+    return call
+
+
+for name, at in (("calibrate", 1), ("calibrate_run", 2)):
+    setattr(paretocal, name, shortcut(getattr(paretocal, name), at))
+runpy.run_path(block, run_name="__main__")
+'''
+
+
+def run_block(lines: list[str], cwd: Path, info: str = "bash") -> subprocess.CompletedProcess:
+    """Run a block in ``cwd`` (a clone, :func:`clone`): bash, or Python through
+    :data:`PY_RUNNER` with the options of its shortcut."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src")]
                                         + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    if info == "python":
+        m = PY_ADDS.search(lines[0])
+        block = cwd / ".docs_block.py"
+        block.write_text("\n".join(lines) + "\n")
+        args = [str(cwd / ".venv" / "bin" / "python"), "-c", PY_RUNNER, str(block)]
+        return subprocess.run(args + (shlex.split(m["opts"]) if m else []), cwd=cwd, env=env,
+                              capture_output=True, text=True, timeout=900)
     script = "set -eu\n" + "\n".join(lines) + "\n"
     return subprocess.run(["bash", "-c", script], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=900)
 
 
-@pytest.mark.parametrize("page", pages_with_commands())
-def test_the_pages_commands_run_on_the_sample_data(page, clone):
-    blocks = sample_data_blocks(DOCS / page)
-    for k, block in enumerate(blocks, 1):
-        lines = with_shortcut(block)
-        proc = run_block(lines, clone)
+def run_page(page: Path, clone: Path, after=None) -> None:
+    """Run the page's blocks marked to run, in order, in ``clone``; ``after(k, info)`` is
+    called after block k."""
+    blocks = runnable_blocks(page)
+    for k, (info, block) in enumerate(blocks, 1):
+        lines = with_shortcut(block) if info == "bash" else block
+        proc = run_block(lines, clone, info)
         shown = "\n".join(lines)
-        assert proc.returncode == 0, (f"docs/{page}, block {k} of {len(blocks)} exited "
+        assert proc.returncode == 0, (f"{page.name}, block {k} of {len(blocks)} exited "
                                       f"{proc.returncode}:\n{shown}\n--- stderr:\n"
                                       f"{proc.stderr[-3000:]}")
         for out in outputs(lines):
             path = clone / out
-            assert path.exists(), f"docs/{page}, block {k}: {out} was not written\n{shown}"
+            assert path.exists(), f"{page.name}, block {k}: {out} was not written\n{shown}"
             if path.is_dir():
-                assert any(path.iterdir()), f"docs/{page}, block {k}: {out} is empty"
+                assert any(path.iterdir()), f"{page.name}, block {k}: {out} is empty"
             else:
-                assert path.stat().st_size > 0, f"docs/{page}, block {k}: {out} is empty"
+                assert path.stat().st_size > 0, f"{page.name}, block {k}: {out} is empty"
+        if after is not None:
+            after(k, info)
+
+
+@pytest.mark.parametrize("page", pages_with_commands())
+def test_the_pages_commands_run_on_the_sample_data(page, clone):
+    run_page(DOCS / page, clone)
+
+
+def test_readme_runs_and_its_python_snippet_is_the_command_line(clone):
+    """README's blocks run in order: the folder, the command line's calibration of it, then
+    the Python snippet, which writes its result into the same run folder: the same result."""
+    run = clone / "runs" / "myrig"
+    seen = {}
+
+    def after(k, info):
+        doc = json.loads((run / "result.json").read_text())
+        seen[info] = doc
+        if info == "bash":
+            assert (run / "run_args.json").exists()
+        else:
+            # The command line's run was replaced whole (its run_args.json with it).
+            assert not (run / "run_args.json").exists()
+
+    run_page(README, clone, after)
+    cli, py = seen["bash"], seen["python"]
+    assert py["T_cam_lidar"] == cli["T_cam_lidar"] and py["n_points"] == cli["n_points"]
+    assert py["config"]["search"] == cli["config"]["search"]           # calib.yaml's 5 deg / 0.2 m
+    assert cli["config"]["search"]["init_error_deg"] == 5.0
 
 
 def test_the_shortcut_adds_options_to_the_named_command_only():
@@ -259,6 +443,31 @@ def test_relative_links_resolve(path):
         elif anchor and dest.suffix == ".md" and anchor not in anchors(dest):
             bad.append(f"{target}: no heading with the anchor #{anchor} in {dest.name}")
     assert not bad, f"{path.relative_to(ROOT)}:\n" + "\n".join(bad)
+
+
+#: A wall time in prose that a user will hold their own against: "about 15 s", "8 min 19 s",
+#: "about 11 minutes".
+WALL_TIME = re.compile(r"\babout \d+(?:\.\d+)? ?(?:s|min|minutes)\b(?! of CPU)|\b\d+ min \d+ s\b")
+#: The pages whose wall times say where they were measured and what a first run adds.
+TIMED_PAGES = (README, DOCS / "getting-started.md", DOCS / "testing.md")
+
+
+def paragraphs(text: str) -> list[str]:
+    """The prose paragraphs of a Markdown text (fenced blocks and inline code left out), each
+    on one line."""
+    return [" ".join(p.split()) for p in re.split(r"\n\s*\n", prose(text)) if p.strip()]
+
+
+@pytest.mark.parametrize("page", TIMED_PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_wall_times_say_where_they_were_measured(page):
+    """A paragraph that gives how long the set-up, the demo or the tests take names the
+    machine (its vCPUs) and its load (nothing else running, or the load average), and what a
+    first run adds (issue 45: "about 15 s on two cores" and "about 11 minutes" said neither)."""
+    bad = [p[:100] for p in paragraphs(page.read_text()) if WALL_TIME.search(p) and not (
+        "vCPU" in p and ("nothing else running" in p or "load average" in p)
+        and "first run" in p)]
+    assert not bad, f"{page.relative_to(ROOT)}: a wall time without its conditions:\n" + \
+        "\n".join(bad)
 
 
 def test_readme_links_into_the_docs_without_anchors():

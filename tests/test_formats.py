@@ -26,7 +26,7 @@ from paretocal.io.exports import (INVERSE_FILE, KITTI_FILE, TF_FILE, kitti_rect_
                                   write_exports)
 from paretocal.io.text import read_kitti_calib
 from paretocal.io.clouds import read_points
-from paretocal.report.results import write_run
+from paretocal.report.results import write_outputs
 
 # --- writers used by the tests (independent of the readers under test) ---------------------------
 
@@ -807,7 +807,7 @@ class TestWriteRun:
 
     def test_every_run_directory_gets_the_exports(self, tmp_path, raw_frames, T_est):
         out = tmp_path / "run"
-        written = write_run(self._result(T_est), out, raw_frames[:2], figures=False)
+        written = write_outputs(self._result(T_est), out, raw_frames[:2], figures=False)
         for name in (KITTI_FILE, TF_FILE, INVERSE_FILE):
             assert out / name in written and (out / name).stat().st_size > 0
         assert "paretocal 0.test" in (out / KITTI_FILE).read_text()
@@ -817,7 +817,7 @@ class TestWriteRun:
         assert not list(out.glob(".*tmp*"))
 
     def test_without_frames_the_kitti_file_holds_T(self, tmp_path, T_est):
-        write_run(self._result(T_est), tmp_path, None, figures=False)
+        write_outputs(self._result(T_est), tmp_path, None, figures=False)
         np.testing.assert_allclose(read_kitti_velo_to_cam(tmp_path / KITTI_FILE), T_est,
                                    atol=1e-12)
 

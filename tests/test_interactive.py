@@ -20,7 +20,7 @@ import pytest
 from paretocal import Settings, calibrate
 from paretocal.camera import Camera, project
 from paretocal.geometry import correction_matrix
-from paretocal.report.results import write_run
+from paretocal.report.results import write_outputs
 from paretocal.report.interactive import (DEPTH_PERCENTILES, MAX_IMAGE_WIDTH, dequantise_xyz,
                                           frame_scores, lidar_layer, page_data,
                                           quantise_xyz, write_interactive)
@@ -39,7 +39,7 @@ def run(raw_frames, tmp_path_factory):
     settings = Settings().replace(search={"pop": 16, "gens": 3}, decision={"polish": False})
     result = calibrate(frames, T_init, settings)
     out = tmp_path_factory.mktemp("interactive_run")
-    written = write_run(result, out, frames)
+    written = write_outputs(result, out, frames)
     assert out / "interactive.html" in written
     return result, frames, out
 
@@ -157,7 +157,7 @@ class TestPage:
         assert banner and "UNRELIABLE" in banner.group(1)
         assert banner.group(1).count("<li>") == len(result.reliability.reasons)
         assert "only 2 frame(s)" in banner.group(1)
-        assert "95 % intervals" not in banner.group(1)              # none for an unreliable result
+        assert "95 % intervals per axis" not in banner.group(1)     # none for an unreliable result
 
     def test_self_contained(self, run):
         _, _, out = run
@@ -315,9 +315,9 @@ def test_page_in_browser(request, tmp_path):
             browser.close()
 
 
-def _open(browser, path: Path):
+def _open(browser, path: Path, width: int = 1400):
     """A new page at ``path``, drawn; returns (page, errors, failed requests, request URLs)."""
-    page = browser.new_page(viewport={"width": 1400, "height": 1100})
+    page = browser.new_page(viewport={"width": width, "height": 1100})
     errors, failed, urls = [], [], []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -553,6 +553,12 @@ def _check_frames_layers_zoom(page, result, frames, data, z_min, T) -> None:
     assert page.evaluate(DIFF_JS, ["none", "edges"]) == e0["edges"]["count"]
     page.uncheck("#layer-edges")
     _wait_attr(page, "layers", "image")
+    # The arrows pick frames also while a layer's checkbox has the focus (issue 45).
+    assert page.evaluate("document.activeElement.id") == "layer-edges"
+    page.keyboard.press("ArrowRight")
+    _wait_attr(page, "frame", frames[1].name)
+    page.keyboard.press("ArrowLeft")
+    _wait_attr(page, "frame", frames[0].name)
     # Intensity, then the feature groups: other colours; the groups of the first n points.
     page.check("#colour-intensity")
     _wait_attr(page, "colour", "intensity")
@@ -600,6 +606,56 @@ def _check_frames_layers_zoom(page, result, frames, data, z_min, T) -> None:
     _wait_attr(page, "zoom", "1.000")
     page.evaluate(SNAP_JS, "reset")
     assert page.evaluate(DIFF_JS, ["f0", "reset"]) == 0
+
+
+def test_page_layout_at_narrow_widths_in_browser(request):
+    """At 900 px and narrower the Pareto plot stays beside or above the run's table, never
+    over it (issue 45: it covered the table at 900 px), and the page does not scroll
+    sideways."""
+    sync_playwright = _require_browser()
+    _, _, path = request.getfixturevalue("run20")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS, headless=True)
+        try:
+            for width in (900, 800, 700):
+                page, errors, _, _ = _open(browser, path, width)
+                plot = page.locator("#pareto svg").bounding_box()
+                table = page.locator("#run-info table").first.bounding_box()
+                apart = (plot["x"] + plot["width"] <= table["x"] + 0.5
+                         or table["y"] + table["height"] <= plot["y"] + 0.5
+                         or plot["y"] + plot["height"] <= table["y"] + 0.5)
+                assert apart, (width, plot, table)
+                assert page.evaluate("document.documentElement.scrollWidth") <= width, width
+                assert not errors, errors
+                page.close()
+        finally:
+            browser.close()
+
+
+def test_pareto_png_draws_both_fronts_on_one_point_set_and_says_so(raw_frames):
+    """The polish re-chooses the feature points at the estimate and scores the final front on
+    them; the search scored its front on those chosen at the start. pareto.png drew that
+    front at a better f1 than the polished one without saying why (issue 45): it now draws it
+    re-scored on the final points, says so in the legend and a caption, and there the
+    polished front is the better one."""
+    from paretocal.report.figures import pareto_plot, searched_front
+
+    T_init = raw_frames[0].T_ref @ correction_matrix(np.array([0.05, -0.03, 0.02, 1, -1, 0.5]))
+    r = calibrate(raw_frames[:2], T_init, Settings().replace(search={"pop": 16, "gens": 3}))
+    assert r.settings.decision.polish and r.settings.features.reselect
+    Fn, label, caption = searched_front(r)
+    X = r.nsga_front[0].copy()
+    X[:, 6] = np.clip(X[:, 6], *r.n_range)
+    np.testing.assert_array_equal(Fn, r.objective.evaluate(X))
+    assert "re-scored on the final points" in label and "features.reselect" in caption
+    assert r.front.F[:, 0].min() <= Fn[:, 0].min()
+    fig = pareto_plot(r)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert label in legend and any(caption[:40] in t.get_text() for t in fig.texts)
+    # Without the re-selection both fronts share one objective: drawn as scored, no caption.
+    same = dataclasses.replace(r, settings=r.settings.replace(features={"reselect": False}))
+    Fs, label, caption = searched_front(same)
+    assert Fs is r.nsga_front[1] and label == "NSGA-II front (before polish)" and caption == ""
 
 
 def test_importing_the_figures_leaves_matplotlib_alone(tmp_path):

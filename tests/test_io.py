@@ -179,7 +179,7 @@ class TestSelectFrames:
     def test_specs(self, spec, expect):
         assert select_frames(self.names, spec) == expect
 
-    @pytest.mark.parametrize("spec", ["40", "abc", "30:40"])
+    @pytest.mark.parametrize("spec", ["40", "abc", "30:40", "0:50", "-21:"])
     def test_bad(self, spec):
         with pytest.raises(SettingsError, match="--frames"):
             select_frames(self.names, spec)

@@ -121,9 +121,11 @@ def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
     assert not r.weak and r.moved_deg == pytest.approx(float(e["rotation_deg"]))
     assert r.moved_m == pytest.approx(float(e["translation_cm"]) / 100)
     doc = r.to_dict()
-    assert list(doc) == ["weak", "notes", "verdict", "score", "tolerances", "moved",
-                         "neighbour_fraction", "best_neighbour_gain_px", "neighbour_step",
-                         "T_checked", "T_local_optimum", "quality", "frames", "features"]
+    assert list(doc) == ["weak", "too_few", "notes", "verdict", "score", "spread",
+                         "tolerances", "moved", "neighbour_fraction", "best_neighbour_gain_px",
+                         "neighbour_step", "T_checked", "T_local_optimum", "quality", "frames",
+                         "features"]
+    assert doc["spread"] == {"rotation_deg": None, "translation_cm": None}
     assert doc["tolerances"] == {"rotation_deg": 0.5, "translation_cm": 7.0}
     assert doc["neighbour_step"] == {"translation_cm": 5.0, "rotation_deg": 0.5}
     assert doc["moved"] == {"rotation_deg": float(e["rotation_deg"]),
@@ -146,6 +148,12 @@ def test_the_check_report_is_held_in_metres_and_written_in_cm(bowls):
     text = json.dumps(moving.to_dict(), indent=2)
     assert list(moving.to_dict())[-1] == "motion" and moving.to_dict()["motion"]["agree"]
     assert json.dumps(CheckReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
+    # Too few frames to judge, with the spreads: read back the same.
+    few = replace(named, too_few=True, notes=("the frames are too few to judge: ...",),
+                  spread_deg=0.24, spread_m=0.0241)
+    text = json.dumps(few.to_dict(), indent=2)
+    assert few.to_dict()["spread"] == {"rotation_deg": 0.24, "translation_cm": 2.41}
+    assert json.dumps(CheckReport.from_dict(json.loads(text)).to_dict(), indent=2) == text
 
 
 @pytest.mark.slow
@@ -164,6 +172,8 @@ class TestCheckOnKitti:
         T = raw_frames[0].T_ref @ correction_matrix(perturbation)
         r = check_extrinsic(raw_frames, T)
         assert r.verdict == verdict, r.to_dict()["moved"]
+        # Twenty frames decide: no deciding figure's spread reaches its threshold.
+        assert not r.too_few and not r.weak, r.notes
         # The rig drives straight: roll (about the LiDAR's x, the direction of travel) and
         # translation are not the motion's to judge; it agrees with all three.
         assert r.motion is not None and r.motion.applied and r.motion.agree, r.motion
@@ -198,6 +208,30 @@ class TestCheckOnKitti:
 
         line = motion_line(r.motion)
         assert "DISAGREES" in line and "3.00 deg apart" in line and "4 direction(s)" in line
+
+    def test_few_frames_say_they_are_too_few_to_judge(self, raw_date, tmp_path, capfd):
+        """Five frames (1 to 6) called the reference miscalibrated, the motion 1.51 deg from
+        it against a tolerance of 1.5 deg from three directions of travel (issue 45): a figure
+        known only to +-0.68 deg from their scatter, so the frames are too few to judge, and
+        the check says so; the score is explained where it is shown."""
+        import json
+
+        from .helpers import run_cli
+
+        out = tmp_path / "check.json"
+        code, text, err = run_cli(capfd, "check", raw_date, "--frames", "1:6", "--out", out,
+                                  "--quiet")
+        assert code == 0, err
+        doc = json.loads(out.read_text())
+        assert doc["too_few"] and doc["weak"], doc["notes"]
+        assert doc["notes"][-1].startswith("the frames are too few to judge: ")
+        assert "but the frames are too few to judge" in text.splitlines()[0]
+        assert "(the move to the local optimum over its tolerance; above 1: miscalibrated)" in text
+        assert "WEAK CHECK: the frames are too few to judge" in text
+        m = doc["motion"]
+        if m["applied"] and not m["agree"]:
+            # The motion convicts it, but not beyond its own spread.
+            assert "the motion puts the rotation" in doc["notes"][-1]
 
     def test_frames_of_a_standing_rig_make_a_weak_check(self, raw_frames, monkeypatch):
         import paretocal.check as check

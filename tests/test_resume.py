@@ -296,7 +296,7 @@ PHASES = [
     ("pipeline", "front_columns", "choosing the solution (after generation 6)", True),
     ("pipeline", "gather_evidence", "gathering the verdict's evidence (after generation 6)",
      True),
-    ("rundir", "write_run", "writing the results (after generation 6)", True),
+    ("rundir", "write_outputs", "writing the results (after generation 6)", True),
 ]
 PHASE_CLI = ["--frames", "0:2", "--pop", "16", "--gens", "6", "--seed", "2", "--no-figures",
              "--quiet", "--checkpoint-every", "2"]

@@ -57,8 +57,29 @@ def test_rig_layout(tmp_path):
     frames = load_rig_frames(cams, "0:2")
     assert frames["front"][1].points is frames["left"][1].points
     # A single-camera command on a rig says what to do.
-    with pytest.raises(InputError, match="only 'paretocal calibrate' takes a rig folder"):
+    with pytest.raises(InputError, match=r"name one with --camera NAME \('paretocal calibrate' "
+                                         r"takes all of them\)"):
         detect_source(rig)
+
+
+def test_one_camera_of_a_rig_is_checked_by_name(tmp_path, capfd):
+    """``check --camera NAME`` reads that camera of a rig folder, as ``calibrate --camera``
+    does (issue 45: it took only a KITTI index); without a name it says which there are."""
+    from .helpers import run_cli
+
+    rig = make_rig(tmp_path)
+    out = tmp_path / "check.json"
+    code, stdout, err = run_cli(capfd, "check", rig, "--camera", "left", "--frames", "0",
+                                "--out", out, "--quiet")
+    assert code == 0, err
+    doc = json.loads(out.read_text())
+    left = dict(rig_cameras(rig))["left"]
+    np.testing.assert_array_equal(doc["T_checked"], left.frames[0].T_ref)
+    assert doc["frames"] == [left.frames[0].name]
+    code, _, err = run_cli(capfd, "check", rig)
+    assert code == 2 and "name the camera with --camera (front, left)" in err
+    code, _, err = run_cli(capfd, "depth", rig, "--camera", "rear", "--out", tmp_path / "d")
+    assert code == 2 and "--camera rear: " in err and "lists the cameras front, left" in err
 
 
 def test_mapping_form(tmp_path):

@@ -520,7 +520,7 @@ def test_a_failed_rerun_keeps_the_run_args_of_the_published_run(capfd, tmp_path,
         raise write_error(run / "result.json", OSError(errno.ENOSPC, "No space left on device"))
 
     with monkeypatch.context() as m:
-        m.setattr(paretocal.rundir, "write_run", full)
+        m.setattr(paretocal.rundir, "write_outputs", full)
         bad_cli(capfd, "calibrate", raw_date, "--out", run, "--seed", "3", *CLI,
                 expect="No space left on device")
 

@@ -63,8 +63,10 @@ def test_no_restart_when_switched_off(stage):
     s = SETTINGS.replace(decision={"restarts": 0})
     ev = gather_evidence(stage.objective, s, stage.n_min, stage.n_max, _full(stage, np.zeros(6)))
     assert ev.restart is None and ev.cameras is None
-    assert set(ev.to_dict()) == {"contrast", "start", "intervals"}
-    assert list(ev.to_dict(intervals=False)) == ["contrast", "start"]
+    assert set(ev.to_dict()) == {"contrast", "start", "intervals", "move"}
+    assert list(ev.to_dict(intervals=False)) == ["contrast", "start", "move"]
+    # The reference is (near) its own local optimum: the way there is inside the intervals.
+    assert ev.intervals.beyond_optimum() == {} and ev.move.polished
     doc = ev.to_dict()
     assert json.dumps(Evidence.from_dict(json.loads(json.dumps(doc))).to_dict()) == json.dumps(doc)
 
@@ -170,6 +172,74 @@ def test_intervals_combine_jackknife_and_alignment():
     # Without any matched edge the alignment is unknown: nothing is determined.
     none = intervals(se, per_px, float("nan"), Settings().search)
     assert none.undetermined == tuple(AXES) and none.to_dict()["alignment_px"] is None
+
+
+def test_intervals_about_the_result_add_the_way_to_its_optimum():
+    """Measured at the result's local optimum, the intervals hold for the result with the way
+    to that optimum added on each axis; an axis moved by more than the interval about the
+    optimum is named."""
+    from paretocal.verdict import PolishMove
+
+    se = np.array([0.001, 0.001, 0.001, 0.01, 0.01, 0.01])            # m, deg
+    per_px = np.array([0.02, 0.025, 0.024, 0.14, 0.18, 0.2])          # per pixel rms
+    move = np.array([0.039, -0.102, 0.0, 0.62, 0.0, 0.0])             # m, deg
+    at_opt = intervals(se, per_px, 1.43, Settings().search)
+    iv = intervals(se, per_px, 1.43, Settings().search, move=move)
+    np.testing.assert_allclose(iv.half_width, at_opt.half_width + np.abs(move), atol=1e-6)
+    doc = iv.to_dict()
+    assert doc["move"] == {"x": 3.9, "y": 10.2, "z": 0.0, "yaw": 0.62, "pitch": 0.0, "roll": 0.0}
+    back = Intervals.from_dict(json.loads(json.dumps(doc)))
+    assert back.to_dict() == doc and "move" not in at_opt.to_dict()
+    # y moved 10.2 cm against 3.6 about the optimum, yaw 0.62 deg against 0.2; x 3.9 cm
+    # against 2.9; z, pitch and roll not at all.
+    beyond = iv.beyond_optimum()
+    assert list(beyond) == ["x", "y", "yaw"] and beyond["y"][0] == 10.2
+    assert beyond["y"][1] == pytest.approx(doc["half_width"]["y"] - 10.2, abs=1e-4)
+    assert at_opt.beyond_optimum() == {}
+    # The OK line of a run that did not polish says how far the polish would move it.
+    mv = PolishMove(d=move, separation_deg=0.04, separation_m=0.0078, px=0.4, polished=False)
+    assert PolishMove.from_dict(json.loads(json.dumps(mv.to_dict()))).to_dict() == mv.to_dict()
+    rel = Reliability(verdict="ok", evidence=Evidence(intervals=at_opt, move=mv), frames=3)
+    assert verdict_text(rel) == ("OK: nothing the run measured casts doubt on the result (3 "
+                                 "frames; not polished: a local polish moves it 0.04 deg / "
+                                 "0.78 cm, within the intervals)")
+    polished = dataclasses.replace(mv, polished=True)
+    assert verdict_text(dataclasses.replace(rel, evidence=Evidence(move=polished))).endswith(
+        "(3 frames)")
+
+
+def test_an_unpolished_short_search_is_not_trusted_on_the_frames_agreement_alone(raw_date,
+                                                                                 tmp_path,
+                                                                                 capfd):
+    """The command of a user trying the tool (issue 45): three frames, 48 evaluations and no
+    polish from README's tape-measure guess ended 0.89 deg / 17.7 cm from KITTI's reference
+    and was judged OK with y +-3.6 cm. The local polish the verdict measures moves it 0.85
+    deg / 12.6 cm: it is now judged unreliable, saying so, or its intervals cover its error."""
+    from .helpers import run_cli
+
+    init = tmp_path / "guess.yaml"
+    init.write_text("T_cam_lidar: [[0, -1, 0, 0], [0, 0, -1, -0.08], [1, 0, 0, -0.27], "
+                    "[0, 0, 0, 1]]\n")
+    out = tmp_path / "run"
+    code, text, err = run_cli(capfd, "calibrate", raw_date, "--init", init, "--frames", "0:3",
+                              "--pop", 16, "--gens", 3, "--no-polish", "--no-figures",
+                              "--out", out)
+    assert code == 0, err
+    doc = json.loads((out / "result.json").read_text())
+    error, rel = doc["reference_error"], doc["reliability"]
+    far = error["rotation_deg"] > 1.0 or error["translation_cm"] > 10.0
+    if rel["verdict"] == "ok":
+        half = rel["intervals"]["half_width"]
+        for axis, key in zip(AXES, ("x_lidar_cm", "y_lidar_cm", "z_lidar_cm", "yaw_deg",
+                                    "pitch_deg", "roll_deg")):
+            assert half[axis] is not None and abs(error[key]) <= half[axis], (axis, error, half)
+        assert "not polished: a local polish moves it" in text
+    else:
+        assert any("a local polish from the result moves it" in r for r in rel["reasons"])
+        assert "verdict UNRELIABLE: the search stopped short of the objective's optimum" in text
+    assert not (far and rel["verdict"] == "ok" and rel["intervals"] is None)
+    move = rel["evidence"]["move"]
+    assert move["polished"] is False and move["px"] > 0
 
 
 def test_the_bias_tolerance_is_the_alignment_or_half_the_sampling_step():

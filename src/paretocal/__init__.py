@@ -30,7 +30,7 @@ _LAZY = {"check_extrinsic": "check", "Settings": "config", "load_settings": "con
          "depth_map": "depth", "write_depth": "depth", "ParetocalError": "errors",
          "extract_bag": "extract",
          "load_frames": "io", "read_extrinsic": "io", "read_init": "io", "write_extrinsic": "io",
-         "write_run": "report.results", "CalibrationResult": "pipeline",
+         "write_run": "rundir", "CalibrationResult": "pipeline",
          "calibrate": "pipeline", "calibrate_run": "rundir", "resume_run": "rundir",
          "StudyPlan": "apps.study", "run_study": "apps.study",
          "run_batch": "apps.batch", "calibrate_rig": "apps.rig"}

@@ -54,9 +54,11 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     T_init : ndarray, shape (4, 4), optional
         Initial ``T_cam_lidar``; the dataset's own extrinsic when omitted.
     settings : Settings, optional
-        For a dataset folder, what its calib.yaml states (``init_error``) replaces the
-        defaults these leave (:func:`~paretocal.config.dataset_settings`), as on the command
-        line; frames already loaded are calibrated with the settings as given.
+        What the dataset's calib.yaml states (``init_error``) replaces the defaults these
+        leave (:func:`~paretocal.config.dataset_settings`), as on the command line: for a
+        dataset folder, and for frames loaded from one (:func:`~paretocal.load_frames`; they
+        carry it, :attr:`~paretocal.io.frame.Frame.options`), so that
+        ``calibrate(load_frames(folder))`` is ``calibrate(folder)``.
     progress : callable, optional
         ``progress(stage, done, total)`` for ``stage`` in ``features`` (frames), ``search``
         (generations), ``polish`` (its passes: the first, and the one after re-selecting
@@ -71,16 +73,17 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         frames' clouds, for another camera of the rig: ``source`` must then be frames over the
         same clouds; they are not done again.
     dataset_options : bool
-        False: the settings are final, also for a dataset folder (they state ``init_error``
-        even where it is the default).
+        False: the settings are final, also for a dataset folder or its frames (they state
+        ``init_error`` even where it is the default).
 
     Returns
     -------
     CalibrationResult
         ``settings`` holds the settings used.
     """
-    if isinstance(source, (str, Path)) and dataset_options:
-        settings = dataset_settings(settings, source_options(source))
+    if dataset_options:
+        settings = dataset_settings(settings, source_options(
+            source if isinstance(source, (str, Path)) else list(source)))
     settings = (settings or Settings()).validate()
     t_start = time.perf_counter()
     timings: dict[str, float] = {}

@@ -3,7 +3,7 @@
 ``calibrate_run`` saves the search to ``checkpoint.npz`` every few generations, with
 ``checkpoint_args.json`` beside it (what a resume needs: the source, the initial extrinsic, every
 setting, whether figures are drawn), and on completion publishes the run's files
-(``report.results.write_run``) with its arguments as ``run_args.json``, and removes the
+(``report.results.write_outputs``) with its arguments as ``run_args.json``, and removes the
 checkpoint. An interrupt (SIGINT, or SIGTERM turned into one by the caller) during the search
 writes ``partial_front.csv`` and raises :class:`~paretocal.search.checkpoint.SearchInterrupted`;
 ``resume_run`` rebuilds the run from the folder and continues from the checkpoint to the result
@@ -48,12 +48,13 @@ from .errors import InputError, Interrupted, ParetocalError
 from .geometry import check_rigid
 from .inputs import load_joint
 from .io import load_frames, rig_source, source_options
-from .io.atomic import atomic_write_text, temporary_pattern
+from .io.atomic import (atomic_write_text, check_output_dir, check_own_folder,
+                        temporary_pattern)
 from .io.frame import Frame
 from .io.paths import not_plain, odd_kind, open_plain
 from .io.text import load_json
 from .pipeline import calibrate
-from .report.results import partial_front_csv, write_run
+from .report.results import partial_front_csv, write_outputs
 from .result import CalibrationResult
 from .search.checkpoint import Checkpoint
 
@@ -225,7 +226,7 @@ def _acquire(out: Path, fcntl) -> int:
         os.close(fd)
 
 
-def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
+def publish_run(result: CalibrationResult, out: Path, frames: list[Frame] | None,
                 figures: bool = True, args: dict | None = None) -> list[Path]:
     """Write the run's files into ``out`` so that it never holds parts of two runs (module
     docstring); ``args``, the run's arguments (:func:`run_record`), are published as
@@ -241,7 +242,7 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
     shutil.rmtree(staging, ignore_errors=True)         # a real folder: checked above
     try:
         os.mkdir(staging)
-        written = write_run(result, staging, frames, figures=figures)
+        written = write_outputs(result, staging, frames, figures=figures)
         if args is not None:
             atomic_write_text(staging / RUN_ARGS, json.dumps(args, indent=1) + "\n")
             written.append(staging / RUN_ARGS)
@@ -256,7 +257,7 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
         raise
     # The marker goes first, then everything the previous run published or left behind.
     (out / RESULT).unlink(missing_ok=True)
-    for name in set(previous) | {PARTIAL_FRONT, RUN_ARGS}:     # write_run writes files only
+    for name in set(previous) | {PARTIAL_FRONT, RUN_ARGS}:     # write_outputs writes files only
         (out / name).unlink(missing_ok=True)
     atomic_write_text(out / OUTPUTS, "\n".join(names) + "\n")
     for name in sorted(names, key=lambda n: n == RESULT):
@@ -264,6 +265,54 @@ def publish_run(result: CalibrationResult, out: Path, frames: list[Frame],
     shutil.rmtree(staging, ignore_errors=True)
     _remove_temporaries(out, set(names) | set(MARKS))
     return [out / n for n in names]
+
+
+def write_run(result: CalibrationResult, out_dir: str | Path,
+              frames: list[Frame] | None = None, figures: bool = True,
+              force: bool = False) -> list[Path]:
+    """Write a calibration's run folder, as ``paretocal calibrate --out`` does: the files of
+    docs/conventions.md section 3, published whole (:func:`publish_run`).
+
+    A folder that holds a run already (of the command line, :func:`calibrate_run` or this
+    function) is replaced whole: its previous run's outputs, its ``run_args.json`` (which
+    would describe another run) and any partial front are removed, so that it never mixes two
+    runs. A folder of other files is refused, as ``--out`` refuses it without ``--force``.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (:func:`paretocal.calibrate`).
+    out_dir : str or Path
+        The run folder (made when missing).
+    frames : list of Frame, optional
+        The frames calibrated: needed for the overlays and ``interactive.html``.
+    figures : bool
+        Write ``pareto.png``, the overlays and ``interactive.html``.
+    force : bool
+        Write into a folder that is not empty and holds no run (its files of the same names
+        are replaced).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    SettingsError
+        ``out_dir`` cannot take a run: not a writable folder, or a folder of other files
+        without ``force``.
+    ParetocalError
+        Another process is writing the folder.
+    """
+    out = Path(out_dir)
+    check_output_dir(out, "write_run: out_dir")
+    if not force:
+        check_own_folder(out, MARKS, "run", "write_run: out_dir", "pass force=True")
+    # The frames as calibrated (de-skewed) for the overlays, as calibrate_run draws them.
+    drawn = None if frames is None else (result.sweeps or frames)
+    with locked(out):
+        return publish_run(result, out, drawn, figures=figures)
 
 
 def _remove_temporaries(out: Path, names) -> None:
@@ -359,8 +408,9 @@ def calibrate_run(  # noqa: PLR0913 - dataset_options is keyword-only
         if checkpoint_every > 0:
             ckpt = _RunCheckpoint(out / CHECKPOINT, checkpoint_every, args)
         try:
+            # The settings are final here (the dataset's options decided above).
             result = calibrate(frames, T_init, settings, progress=progress, checkpoint=ckpt,
-                               lidar=lidar)
+                               lidar=lidar, dataset_options=False)
             try:
                 if progress is not None:
                     progress("writing", 0, 1)

@@ -22,7 +22,10 @@ agreement of the frames) and from two checks made for it after the calibration:
 :func:`intervals` turns the jackknife standard errors, the image alignment the result reached
 (:func:`alignment_px`) and how far each axis can move for a pixel of displacement
 (:func:`pose_per_px`) into per-axis 95 % intervals, and names the axes the data do not
-determine.
+determine. They are measured at the result's local optimum, so they hold for the result only
+with the way from it to that optimum added (:func:`polish_move`): what more search would still
+move it. A result the local polish moves beyond the intervals the data give about the optimum
+(a search too short, unpolished) is not where the frames put it, however well they agree.
 """
 
 from __future__ import annotations
@@ -466,6 +469,55 @@ class CameraAgreement:
 
 
 @dataclass(frozen=True)
+class PolishMove:
+    """What a local polish from the result moves it (:func:`polish_move`): the way from the
+    result to its local optimum at every feature point without the sampling-error charge,
+    the pose the intervals are measured at. A search that ended short of its optimum (too few
+    generations, the polish switched off) is moved by it; a polished result hardly at all.
+
+    Attributes
+    ----------
+    d : ndarray, shape (6,)
+        The correction from the result to its local optimum, on the correction's axes (the
+        LiDAR frame; m and deg, held as written in cm and deg, 4 decimals).
+    separation_deg : float
+        Its rotation (deg, 4 decimals).
+    separation_m : float
+        Its translation (m; written in cm, 3 decimals).
+    px : float
+        Mean displacement of the feature points between the two (px, 3 decimals).
+    polished : bool
+        Whether the run polished its front (``decision.polish``).
+    """
+
+    d: np.ndarray
+    separation_deg: float
+    separation_m: float
+    px: float
+    polished: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``result.json`` writes it (cm and deg)."""
+        return {"d": _per_axis(self.d, 4), "separation_deg": _or_none(self.separation_deg),
+                "separation_cm": _cm_or_none(self.separation_m, 3),
+                "px": _or_none(self.px), "polished": bool(self.polished)}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "PolishMove":
+        """Read back from :meth:`to_dict`'s form; a figure it lacks reads as NaN.
+
+        Parameters
+        ----------
+        doc : dict
+            The :meth:`to_dict` form (lengths in cm, angles in deg, as ``result.json`` writes
+            them).
+        """
+        return cls(d=_axes_si(doc.get("d")), separation_deg=_nan(doc.get("separation_deg")),
+                   separation_m=_nan(doc.get("separation_cm")) / 100.0,
+                   px=_nan(doc.get("px")), polished=bool(doc.get("polished", True)))
+
+
+@dataclass(frozen=True)
 class Intervals:
     """Per-axis 95 % intervals of the correction (:func:`intervals`), on the correction's
     axes ``x, y, z, yaw, pitch, roll`` (the LiDAR frame; m and deg). Every per-axis figure
@@ -491,6 +543,9 @@ class Intervals:
         The bound of a bias the frames share (m, deg).
     resolution_per_px : ndarray, shape (6,), or None
         Change of each axis alone per pixel (m, deg per px).
+    move : ndarray, shape (6,), or None
+        What a local polish moves the result by on each axis (m, deg; :class:`PolishMove`),
+        included in ``half_width``; None: not measured (nothing added).
     """
 
     jackknife_se: np.ndarray
@@ -501,6 +556,7 @@ class Intervals:
     per_px: np.ndarray
     bias: np.ndarray
     resolution_per_px: np.ndarray | None = None
+    move: np.ndarray | None = None
 
     @property
     def undetermined(self) -> tuple[str, ...]:
@@ -530,6 +586,22 @@ class Intervals:
             "per_px": _per_axis(self.per_px, 5), "bias": _per_axis(self.bias, 5)}
         if self.resolution_per_px is not None:
             out["resolution_per_px"] = _per_axis(self.resolution_per_px, 5)
+        if self.move is not None:
+            out["move"] = _per_axis(self.move, 5)
+        return out
+
+    def beyond_optimum(self) -> dict[str, tuple[float, float]]:
+        """The axes on which the result's local optimum lies outside the interval the data
+        give about it: ``{axis: (move, half-width about the optimum)}`` in cm and deg (the
+        determined axes only; empty without a move)."""
+        if self.move is None:
+            return {}
+        half, move = self.half_width_report(), _per_axis(np.abs(self.move), 5)
+        out = {}
+        for a in AXES:
+            h, m = half[a], move[a]
+            if h is not None and m is not None and m > h - m:
+                out[a] = (m, round(h - m, 4))
         return out
 
     @classmethod
@@ -546,13 +618,15 @@ class Intervals:
         undetermined = set(doc.get("undetermined") or [])
         det = doc.get("determined") or {}
         samp, res = doc.get("sampling_px"), doc.get("resolution_per_px")
+        move = doc.get("move")
         return cls(jackknife_se=_axes_si(doc.get("jackknife_se")),
                    half_width=_axes_si(doc.get("half_width")),
                    determined=np.array([bool(det.get(a, a not in undetermined)) for a in AXES]),
                    alignment_px=_nan(doc.get("alignment_px")),
                    sampling_px=None if samp is None else np.array([_nan(v) for v in samp]),
                    per_px=_axes_si(doc.get("per_px")), bias=_axes_si(doc.get("bias")),
-                   resolution_per_px=None if res is None else _axes_si(res))
+                   resolution_per_px=None if res is None else _axes_si(res),
+                   move=None if move is None else _axes_si(move))
 
 
 @dataclass(frozen=True)
@@ -576,6 +650,8 @@ class Evidence:
         The result's rotation against the recording's motion
         (:func:`paretocal.crosscheck.motion_agreement`); None when not checked (fewer than
         three frames, a joint calibration, or ``decision.motion_check`` off).
+    move : PolishMove or None
+        What a local polish from the result moves it (:func:`polish_move`).
     """
 
     contrast: Contrast | None = None
@@ -584,6 +660,7 @@ class Evidence:
     restart: RestartCheck | None = None
     cameras: CameraAgreement | None = None
     motion: MotionAgreement | None = None
+    move: PolishMove | None = None
 
     def to_dict(self, intervals: bool = True) -> dict[str, Any]:
         """As ``result.json`` writes it, the parts gathered by name.
@@ -599,7 +676,8 @@ class Evidence:
         """
         parts = {"contrast": self.contrast, "start": self.start,
                  "intervals": self.intervals if intervals else None,
-                 "restart": self.restart, "cameras": self.cameras, "motion": self.motion}
+                 "restart": self.restart, "cameras": self.cameras, "motion": self.motion,
+                 "move": self.move}
         return {k: v.to_dict() for k, v in parts.items() if v is not None}
 
     @classmethod
@@ -620,7 +698,7 @@ class Evidence:
                    intervals=part("intervals", Intervals),
                    restart=part("restart", RestartCheck),
                    cameras=part("cameras", CameraAgreement),
-                   motion=part("motion", MotionAgreement))
+                   motion=part("motion", MotionAgreement), move=part("move", PolishMove))
 
 
 @dataclass(frozen=True)
@@ -1108,10 +1186,10 @@ def bias_tolerance_px(align_px: float, sampling: np.ndarray | None) -> float:
     return float(align_px)
 
 
-def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
+def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,  # noqa: PLR0913
               search: SearchSettings,
               res_per_px: np.ndarray | None = None, *, sampling_px: np.ndarray | None = None,
-              bias: np.ndarray | None = None) -> Intervals:
+              bias: np.ndarray | None = None, move: np.ndarray | None = None) -> Intervals:
     """Per-axis 95 % intervals of the correction (computed in report units, cm and deg, and
     held in m and deg as written: :class:`Intervals`).
 
@@ -1124,9 +1202,11 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
     half the LiDAR's finest sampling step in the image (:func:`bias_tolerance_px`), on
     any combination of axes. ``bias`` is that bound per axis (the tolerance times
     ``per_px``, the largest change of that axis among the poses that move the points by a
-    pixel rms); without it, ``align_px * per_px``. half = sqrt((Z95 se)^2 + bias^2). An axis
-    whose half-width exceeds the stated initial error, or that has no jackknife (one frame),
-    is *not determined* by the data.
+    pixel rms); without it, ``align_px * per_px``. half = sqrt((Z95 se)^2 + bias^2): about
+    the pose they are measured at, the result's local optimum. About the result itself, the
+    way to that optimum, ``move``, is added on each axis: half + |move|. An axis whose
+    half-width exceeds the stated initial error, or that has no jackknife (one frame), is
+    *not determined* by the data.
 
     Parameters
     ----------
@@ -1144,6 +1224,9 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
         The LiDAR's sampling step in the image (u, v), reported beside.
     bias : ndarray, shape (6,), optional
         The shared bias's bound per axis (m and deg).
+    move : ndarray, shape (6,), optional
+        The correction from the result to its local optimum (m and deg;
+        :attr:`PolishMove.d`); none added when omitted.
 
     Returns
     -------
@@ -1160,6 +1243,9 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
     if not np.isfinite(align_px):
         b = np.full(6, np.nan)
     half = np.sqrt((Z95 * se) ** 2 + b ** 2)
+    moved = None if move is None else _rounded_si(np.abs(np.asarray(move, float)) * TO_REPORT, 5)
+    if moved is not None:
+        half = half + np.nan_to_num(moved * TO_REPORT)
     s = search
     limit = np.r_[[100 * s.init_error_m] * 3, [s.init_error_deg] * 3]
     ok = np.isfinite(half) & (half <= limit)
@@ -1172,13 +1258,46 @@ def intervals(jackknife_se: np.ndarray, per_px: np.ndarray, align_px: float,
                                for v in np.asarray(sampling_px, float)])),
         per_px=_rounded_si(m, 5), bias=_rounded_si(b, 5),
         resolution_per_px=(None if res_per_px is None else
-                           _rounded_si(np.asarray(res_per_px, dtype=np.float64) * TO_REPORT, 5)))
+                           _rounded_si(np.asarray(res_per_px, dtype=np.float64) * TO_REPORT, 5)),
+        move=moved)
+
+
+def polish_move(objective, x: np.ndarray, x_opt: np.ndarray, polished: bool) -> PolishMove:
+    """What a local polish from the result ``x`` (7,) moves it: the way to its local optimum
+    ``x_opt`` (7,) (:func:`~paretocal.quality.local_optimum`, which the evidence computes
+    anyway: nothing is evaluated but the displacement).
+
+    Parameters
+    ----------
+    objective : CalibrationObjective
+        The run's objective.
+    x : ndarray, shape (7,)
+        The result ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
+    x_opt : ndarray, shape (7,)
+        Its local optimum at every point.
+    polished : bool
+        Whether the run polished its front.
+
+    Returns
+    -------
+    PolishMove
+    """
+    from .quality import correction_between
+
+    T = objective.transforms(np.vstack([x, x_opt]))
+    e = pose_error(T[1], T[0])
+    return PolishMove(d=_rounded_si(correction_between(T[0], T[1]) * TO_REPORT, 4),
+                      separation_deg=round(float(e["rotation_deg"]), 4),
+                      separation_m=round(float(e["translation_cm"]), 3) / 100.0,
+                      px=round(float(displacement_px(objective, x, x_opt)), 3),
+                      polished=bool(polished))
 
 
 def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                     sampling: np.ndarray | None = None, cameras: dict | None = None) -> Evidence:
-    """Everything :func:`reliability` needs beyond the run itself: the result's local optimum,
-    the restart(s), the image-cloud agreement and the intervals (see the module docstring).
+    """Everything :func:`reliability` needs beyond the run itself: the result's local optimum
+    and the way to it, the restart(s), the image-cloud agreement and the intervals (see the
+    module docstring).
     The intervals use their own jackknife, at the result's local optimum (not the run's
     quality report at the result). ``sampling`` (2,): the LiDAR's sampling step
     in the image, px along u and v (:func:`~paretocal.features.prepare.sampling_px`, the
@@ -1217,13 +1336,15 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
     at_opt = quality_report(objective, x_opt, pixel_fd_step(objective, x_opt))
     align = alignment_px(objective, x_opt)
     per_px = pose_per_px(objective, x_opt)
+    # The intervals are measured at the optimum; the result is where the search stopped.
+    move = polish_move(objective, x, x_opt, settings.decision.polish)
     return Evidence(
         contrast=contrast_evidence(objective, settings.search, x_opt),
         start=start_evidence(objective, x_opt),
         intervals=intervals(at_opt.jackknife_se, per_px, align, settings.search,
                             axis_resolution(objective, x_opt), sampling_px=sampling,
-                            bias=bias_tolerance_px(align, sampling) * per_px),
-        restart=restart,
+                            bias=bias_tolerance_px(align, sampling) * per_px, move=move.d),
+        restart=restart, move=move,
         cameras=(camera_evidence(objective, x_opt, cameras)
                  if cameras is not None and len(cameras) > 1 else None))
 
@@ -1366,6 +1487,9 @@ def reliability(result: "CalibrationResult") -> Reliability:
             f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
             "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
             "(without --joint) and compare")
+    short = _short_of_optimum(ev)
+    if short:
+        reasons.append(short)
     reasons += _cross_reasons(ev.motion, None if wide is None else wide.photo, n_frames)
     ct = ev.contrast
     # A z that is not a number (random poses that all score alike: no spread to compare
@@ -1426,6 +1550,28 @@ def _cross_reasons(mc: MotionAgreement | None, photo, n_frames: int) -> list[str
             "edges all favour a wrong pose; give a better start, or frames with structure at "
             "several distances")
     return reasons
+
+
+def _short_of_optimum(ev: Evidence) -> str | None:
+    """The reason to distrust a result that a local polish moves beyond the intervals the data
+    give about its local optimum (:meth:`Intervals.beyond_optimum`): the search stopped short
+    of where the frames put it, so their agreement (the jackknife, the intervals) describes
+    another pose. None otherwise."""
+    iv, mv = ev.intervals, ev.move
+    if iv is None or mv is None:
+        return None
+    beyond = iv.beyond_optimum()
+    if not beyond:
+        return None
+    units = dict(zip(AXES, UNITS))
+    axes = ", ".join(f"{a} {m:.2g} {units[a]} against +-{h:.2g}" for a, (m, h) in beyond.items())
+    todo = ("run again with the polish (without --no-polish) or a longer search (larger --pop "
+            "and --gens)" if not mv.polished else
+            "run again with a longer search (larger --pop and --gens)")
+    return (f"the search stopped short of the objective's optimum: a local polish from the "
+            f"result moves it {mv.separation_deg:.2g} deg / {cm_written(mv.separation_m, 3):.2g}"
+            f" cm ({mv.px:.2g} px), beyond the 95 % intervals the frames give about that "
+            f"optimum ({axes}); {todo}")
 
 
 def _narrower_advice(x: np.ndarray, rival: np.ndarray, init_error_deg: float,
@@ -1503,8 +1649,13 @@ def verdict_text(rel: Reliability) -> str:
     """
     reasons = rel.reasons
     if rel.ok or not reasons:
+        mv = None if rel.evidence is None else rel.evidence.move
+        # A run that did not polish says how far the polish would have moved the result.
+        unpolished = ("" if mv is None or mv.polished else
+                      f"; not polished: a local polish moves it {mv.separation_deg:.2g} deg / "
+                      f"{cm_written(mv.separation_m, 3):.2g} cm, within the intervals")
         return (f"OK: nothing the run measured casts doubt on the result ({rel.frames} "
-                "frames)")
+                f"frames{unpolished})")
     more = (f" (and {len(reasons) - 1} more reason{'s' if len(reasons) > 2 else ''} in "
             "result.json)" if len(reasons) > 1 else "")
     start = "" if rel.start is None else f"; {start_text(rel.start)}"

@@ -435,7 +435,7 @@ def _calibrate_entry(entry: Entry, settings_dict: dict, run_dir: Path, check: bo
                                    camera=entry.camera, frames=entry.frames)
     frames = load_frames(entry.source, entry.frames, entry.camera)
     T_init = read_init(entry.init, frames) if entry.init else None
-    result = calibrate(frames, T_init, settings)
+    result = calibrate(frames, T_init, settings, dataset_options=False)   # entry_settings'
     # Staged and published with result.json last: the folder never mixes two runs, and its
     # run_args.json is always the run's own.
     publish_run(result, run_dir, result.sweeps or frames, figures=figures,

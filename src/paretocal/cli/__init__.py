@@ -134,6 +134,7 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
     stdout = sys.stdout = ReaderMayLeave(sys.stdout)
     try:
         command = typer.main.get_command(app)
+        _flags_take_no_value(command)
         rv = command.main(args=args, prog_name="paretocal", standalone_mode=False)
         # typer turns KeyboardInterrupt into exit status 130 itself.
         status = _interrupted(name) if rv == 130 else int(rv) if isinstance(rv, int) else 0
@@ -170,6 +171,22 @@ def main(argv: list[str] | None = None, final: bool = False) -> int:
         sys.unraisablehook = unraisable
         for sig, handler in previous.items():
             signal.signal(sig, signal.SIG_IGN if final else handler)
+
+
+def _flags_take_no_value(command) -> None:
+    """Clear the value placeholder of every flag of ``command`` and its subcommands, the help
+    option's included: a flag takes no value, yet typer's help shows ``<bool>`` beside it
+    (0.29). The help options are made here in the contexts the commands run in, so that they
+    carry the application's names (``-h``, ``--help``)."""
+    root = command.context_class(command, info_name="paretocal", **command.context_settings)
+    subs = getattr(command, "commands", {})
+    for cmd, ctx in [(command, root)] + [
+            (c, c.context_class(c, info_name=n, parent=root, **c.context_settings))
+            for n, c in subs.items()]:
+        help_option = cmd.get_help_option(ctx)
+        for param in [*cmd.params, *([help_option] if help_option is not None else [])]:
+            if getattr(param, "is_flag", False):
+                param.metavar = ""
 
 
 def _quiet_stops(hook):

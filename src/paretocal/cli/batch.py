@@ -11,7 +11,7 @@ import typer
 from ..errors import SettingsError
 from . import app
 from ._common import StageProgress, report, setup_logging
-from .options import ConfigFile, Force, Quiet, Seed, Verbose, output_path
+from .options import ConfigFile, Force, Gens, Pop, Quiet, Seed, Verbose, output_path
 
 
 @app.command()
@@ -27,8 +27,8 @@ def batch(
     check: Annotated[bool, typer.Option("--check/--no-check", help="Also check each initial "
                                                                   "extrinsic.")] = True,
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="PNG figures per run.")] = False,
-    pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
-    gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
+    pop: Pop = None,
+    gens: Gens = None,
     seed: Seed = None,
     config: ConfigFile = None,
     force: Force = False,

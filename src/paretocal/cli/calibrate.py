@@ -12,7 +12,8 @@ import typer
 from ..errors import SettingsError
 from . import app
 from ._common import setup_logging
-from .options import CameraOrName, ConfigFile, Force, Frames, Quiet, Seed, Verbose, output_path
+from .options import (CameraOrName, ConfigFile, Force, Frames, Gens, Pop, Quiet, Seed,
+                      Verbose, camera_index, output_path)
 from .rig import calibrate_rig_folder
 from .run import check_run_out, continue_run, run_calibration
 
@@ -60,8 +61,8 @@ def calibrate(
                                                       "T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
     seed: Seed = None,
-    pop: Annotated[Optional[int], typer.Option(help="Population size.")] = None,
-    gens: Annotated[Optional[int], typer.Option(help="Generations.")] = None,
+    pop: Pop = None,
+    gens: Gens = None,
     camera: CameraOrName = None,
     config: ConfigFile = None,
     budget_ms: Annotated[Optional[float], typer.Option(
@@ -155,9 +156,9 @@ def calibrate(
                                     figures, quiet, checkpoint_every, strict, force, joint)
     if joint:
         raise SettingsError(f"--joint: {source} is not a rig folder (calib.yaml with cameras:)")
-    camera_index = _camera_index(camera) if camera is not None else None
-    if camera_index is not None or frames is not None:
-        settings = dataclasses.replace(settings, camera=camera_index if camera_index is not None
+    index = camera_index(camera) if camera is not None else None
+    if index is not None or frames is not None:
+        settings = dataclasses.replace(settings, camera=index if index is not None
                                        else settings.camera,
                                        frames=frames if frames is not None else settings.frames)
     settings.validate()
@@ -170,11 +171,3 @@ def calibrate(
     run_calibration(loaded, source, T_init, settings, out, figures, quiet, checkpoint_every,
                     strict, dataset_options=adopt)
 
-
-def _camera_index(text: str) -> int:
-    """``--camera`` of a single-camera source: a KITTI camera index."""
-    try:
-        return int(text)
-    except ValueError:
-        raise SettingsError(f"--camera {text}: a KITTI camera index 0-3; camera names apply "
-                            "to a rig folder (calib.yaml with cameras:)") from None

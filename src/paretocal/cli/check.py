@@ -10,7 +10,7 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, ConfigFile, Frames, Quiet, Verbose, output_path
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose, one_camera, output_path
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..crosscheck import MotionAgreement
@@ -23,11 +23,17 @@ def check(
     extrinsic: Annotated[Optional[Path], typer.Option(
         help="Extrinsic to check (YAML/JSON with T_cam_lidar); default: the dataset's.")] = None,
     frames: Frames = None,
-    camera: Camera = 2,
+    camera: Camera = None,
     out: Annotated[Optional[Path], typer.Option(
         parser=output_path, metavar="PATH", help="Write the full report (JSON) here.")] = None,
-    rot_tol: Annotated[float, typer.Option("--rot-tol", help="Rotation tolerance (deg).")] = 0.5,
-    trans_tol: Annotated[float, typer.Option("--trans-tol", help="Translation tolerance (cm).")] = 5.0,
+    rot_tol: Annotated[float, typer.Option(
+        "--rot-tol-deg", "--rot-tol", help="Rotation tolerance (deg; default 0.5).")] = 0.5,
+    trans_tol_m: Annotated[Optional[float], typer.Option(
+        "--trans-tol-m", help="Translation tolerance (m; default 0.05), in metres as every "
+                              "length on the command line.")] = None,
+    trans_tol_cm: Annotated[Optional[float], typer.Option(
+        "--trans-tol", help="Deprecated: the translation tolerance in cm; use --trans-tol-m.")
+    ] = None,
     config: ConfigFile = None,
     verbose: Verbose = False,
     quiet: Quiet = False,
@@ -42,14 +48,16 @@ def check(
     from ..io.atomic import atomic_write_text, check_output_file
 
     setup_logging(verbose, quiet)
+    trans_tol = _translation_tolerance_cm(trans_tol_m, trans_tol_cm)
     if rot_tol <= 0 or trans_tol <= 0:
-        raise SettingsError("--rot-tol and --trans-tol must be positive")
+        raise SettingsError("--rot-tol-deg and --trans-tol-m must be positive")
     if out is not None:
         check_output_file(out)
     settings = load_settings(config)
     from ..io import read_init
-    T = read_init(extrinsic, source, camera) if extrinsic is not None else None
-    loaded = load_frames(source, frames, camera)
+    src, index = one_camera(source, camera)
+    T = read_init(extrinsic, src, index) if extrinsic is not None else None
+    loaded = load_frames(src, frames, index)
     if T is None:
         T = loaded[0].T_ref
         if T is None:
@@ -61,15 +69,33 @@ def check(
     if out is not None:
         atomic_write_text(out, json.dumps(r.to_dict(), indent=2) + "\n")
     which = f"{extrinsic}" if extrinsic is not None else "the dataset's own extrinsic"
-    typer.echo(f"paretocal: {which}: {r.verdict.upper()} (score {r.score:.2f}; the local "
+    judged = r.verdict.upper() + (", but the frames are too few to judge (WEAK CHECK below)"
+                                  if r.too_few else "")
+    typer.echo(f"paretocal: {which}: {judged}; score {r.score:.2f} ({r.SCORE}): the local "
                f"optimum is {r.moved_deg:.3f} deg / {100 * r.moved_m:.2f} cm / "
                f"{r.moved_px:.1f} px away, tolerances {rot_tol:g} deg / {trans_tol:g} cm; "
-               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better)")
+               f"{100 * r.neighbour_fraction:.1f} % of grid neighbours score better")
     typer.echo(f"paretocal: {features_line(r.features)}")
     if r.motion is not None:
         typer.echo(f"paretocal: {motion_line(r.motion)}")
     for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
+
+
+def _translation_tolerance_cm(metres: float | None, cm: float | None) -> float:
+    """The translation tolerance (cm, as the library takes it) from ``--trans-tol-m`` or the
+    deprecated ``--trans-tol`` (cm), which still works and says so."""
+    import logging
+
+    if metres is not None and cm is not None:
+        raise SettingsError("--trans-tol (cm, deprecated) and --trans-tol-m both given; "
+                            "keep --trans-tol-m")
+    if cm is not None:
+        logging.getLogger("paretocal").warning(
+            "--trans-tol is in cm and deprecated: use --trans-tol-m %g (metres, as every "
+            "length on the command line)", cm / 100.0)
+        return float(cm)
+    return 5.0 if metres is None else 100.0 * float(metres)
 
 
 def features_line(features: FeatureCounts) -> str:

@@ -10,7 +10,7 @@ import typer
 from ..errors import InputError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, ConfigFile, Frames, Quiet, Verbose, output_path
+from .options import Camera, ConfigFile, Frames, Quiet, Verbose, one_camera, output_path
 
 
 @app.command()
@@ -22,7 +22,7 @@ def compare(
     source: Annotated[Optional[Path], typer.Argument(
         help="Dataset folder: also say which of the two its frames prefer.")] = None,
     frames: Frames = None,
-    camera: Camera = 2,
+    camera: Camera = None,
     out: Annotated[Optional[Path], typer.Option(
         parser=output_path, metavar="PATH", help="Write the comparison (JSON) here.")] = None,
     page: Annotated[Optional[Path], typer.Option(
@@ -55,9 +55,10 @@ def compare(
             raise InputError(f"{path}: holds KITTI's Tr_velo_to_cam (LiDAR -> unrectified "
                              "camera 0); pass the KITTI SOURCE it belongs to, whose "
                              "rectification turns it into T_cam_lidar")
-    loaded = load_frames(source, frames, camera) if source is not None else None
-    T_a = read_init(a, loaded, camera)
-    T_b = read_init(b, loaded, camera)
+    src, index = one_camera(source, camera)
+    loaded = load_frames(src, frames, index) if src is not None else None
+    T_a = read_init(a, loaded, index)
+    T_b = read_init(b, loaded, index)
     with StageProgress(quiet or loaded is None) as progress:
         c = compare_extrinsics(T_a, T_b, loaded, settings, progress=progress)
     if out is not None:

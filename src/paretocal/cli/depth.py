@@ -10,7 +10,7 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import StageProgress, setup_logging
-from .options import Camera, Frames, Quiet, output_path
+from .options import Camera, Frames, Quiet, one_camera, output_path
 
 
 @app.command()
@@ -21,7 +21,7 @@ def depth(
     extrinsic: Annotated[Optional[Path], typer.Option(
         help="T_cam_lidar to project with (YAML/JSON); default: the dataset's.")] = None,
     frames: Frames = None,
-    camera: Camera = 2,
+    camera: Camera = None,
     max_depth: Annotated[float, typer.Option("--max-depth", help="Colour scale of the "
                                                                  "overlays (m).")] = 50.0,
     quiet: Quiet = False,
@@ -37,9 +37,10 @@ def depth(
     if max_depth <= 0:
         raise SettingsError("--max-depth must be positive")
     check_output_dir(out)
-    loaded = load_frames(source, frames, camera)
+    src, index = one_camera(source, camera)
+    loaded = load_frames(src, frames, index)
     from ..io import read_init
-    T = read_init(extrinsic, source, camera) if extrinsic is not None else loaded[0].T_ref
+    T = read_init(extrinsic, src, index) if extrinsic is not None else loaded[0].T_ref
     if T is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic; pass --extrinsic")
     with StageProgress(quiet) as progress:

@@ -10,7 +10,7 @@ import typer
 from ..errors import ParetocalError, SettingsError
 from . import app
 from ._common import fmt_err
-from .options import Camera, output_path
+from .options import Camera, one_camera, output_path
 
 
 @app.command()
@@ -21,7 +21,7 @@ def perturb(
     rot: Annotated[float, typer.Option(help="Per-axis rotation bound (+- deg).")] = 5.0,
     trans: Annotated[float, typer.Option(help="Per-axis translation bound (+- m).")] = 0.2,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    camera: Camera = 2,
+    camera: Camera = None,
 ) -> None:
     """Write a decalibrated copy of the dataset's extrinsic as an --init file.
 
@@ -35,7 +35,8 @@ def perturb(
 
     _check_perturbation(rot, trans)
     check_output_file(out)
-    src = detect_source(source, camera)
+    chosen, index = one_camera(source, camera)
+    src = detect_source(chosen, index) if isinstance(chosen, Path) else chosen
     T_ref = src.frames[0].T_ref
     if T_ref is None:
         raise ParetocalError(f"{source}: the dataset has no extrinsic to perturb")

@@ -37,7 +37,7 @@ def study(
     checks, decision, innovization, weight robustness) and write report.html to --out."""
     import dataclasses
 
-    from ..config import load_settings
+    from ..config import load_settings, states_init_error
     from ..io import load_frames
     from ..apps.study import STUDY_MARKS, StudyPlan, run_study
 
@@ -59,7 +59,8 @@ def study(
     T_init = read_init(init, source, settings.camera) if init is not None else None
     loaded = load_frames(source, frames, settings.camera)
     with StageProgress(quiet) as progress:
-        doc = run_study(loaded, out, T_init, settings, plan, progress=progress)
+        doc = run_study(loaded, out, T_init, settings, plan, progress=progress,
+                        dataset_options=not states_init_error(config))
     cal = doc["calibration"]
     rb = doc["robustness"]
     typer.echo(f"paretocal: study of {len(doc['frames'])} frames in "

@@ -142,10 +142,11 @@ def check_output_file(path: Path, option: str = "--out") -> Path:
 
 
 def check_own_folder(path: Path, marks: tuple[str, ...], what: str,
-                     option: str = "--out") -> None:
+                     option: str = "--out", force: str = "add --force") -> None:
     """Refuse a folder ``path`` that is not empty and holds none of ``marks`` (names only a
     paretocal ``what`` folder holds): writing there would replace the user's files of the same
-    names. Raises :class:`~paretocal.errors.SettingsError` naming ``option`` and ``--force``.
+    names. Raises :class:`~paretocal.errors.SettingsError` naming ``option`` and how to write
+    there all the same (``force``: the command line's ``--force``).
     """
     try:
         names = set(os.listdir(path))
@@ -157,5 +158,5 @@ def check_own_folder(path: Path, marks: tuple[str, ...], what: str,
     if names and not names & set(marks):
         raise SettingsError(f"{option} {path}: the folder is not empty and is not a paretocal "
                             f"{what} folder (none of {', '.join(marks)}); choose a new or "
-                            f"empty folder, or add --force to write the {what} into it (its "
+                            f"empty folder, or {force} to write the {what} into it (its "
                             "files of the same names are replaced)")

@@ -52,6 +52,10 @@ class Frame:
         image. None: every pixel.
     credit : str or None
         The data's credit line for figures (KITTI's for KITTI sources, calib.yaml's ``credit``).
+    options : dict
+        What the dataset states about itself, as its source does (calib.yaml's
+        ``init_error`` as ``(deg, m)``; :func:`paretocal.io.source_options`): frames loaded
+        from a folder are calibrated with it as the folder itself is.
     """
 
     name: str
@@ -68,6 +72,7 @@ class Frame:
     sensor_pose: np.ndarray | None = None
     mask: np.ndarray | None = None
     credit: str | None = None
+    options: dict = field(default_factory=dict)
 
     @property
     def size(self) -> tuple[int, int]:

@@ -474,10 +474,10 @@ def _folder(root: Path) -> Source:
     data = read_mapping(cpath)
     if data.get("cameras") is not None:
         names = ", ".join(name for name, _ in _rig_entries(cpath, data))
-        raise InputError(f"{cpath}: 'cameras' lists the cameras of a rig ({names}): only "
-                         "'paretocal calibrate' takes a rig folder (all its cameras, or one "
-                         "with --camera NAME); give other commands a single-camera folder (in "
-                         "Python: paretocal.io.rig_cameras)")
+        raise InputError(f"{cpath}: 'cameras' lists the cameras of a rig ({names}): name "
+                         "one with --camera NAME ('paretocal calibrate' takes all of them); in "
+                         "Python, read one camera's frames with load_frames(paretocal.io."
+                         "rig_source(FOLDER, NAME))")
     check_keys(cpath, data, CALIB_KEYS)
     camera = _folder_camera(root, cpath, data)
     mask = _folder_mask(root, cpath, data, camera)
@@ -669,13 +669,18 @@ def _options(cpath: Path, data: dict) -> dict:
     return {"init_error": _init_error(cpath, data["init_error"])}
 
 
-def source_options(source: str | Path | Source) -> dict:
+def source_options(source: str | Path | Source | list[Frame]) -> dict:
     """What a dataset states about itself (:attr:`Source.options`: calib.yaml's
     ``init_error`` as ``(deg, m)``), read from its calib.yaml alone: no frame is listed, so
     nothing is said twice. A source with no calib.yaml (KITTI) states nothing; a rig folder
-    states it for all its cameras."""
+    states it for all its cameras. Frames already loaded state what their source stated
+    (:attr:`Frame.options`), where every frame states the same."""
     if isinstance(source, Source):
         return dict(source.options)
+    if isinstance(source, (list, tuple)):
+        frames = list(source)
+        first = frames[0].options if frames else {}
+        return {k: v for k, v in first.items() if all(f.options.get(k) == v for f in frames)}
     cpath = Path(source) / "calib.yaml"
     if not cpath.is_file():
         return {}
@@ -757,6 +762,7 @@ def select_frames(names: list[str], spec: str | None) -> list[int]:
             step = int(m.group(3)) if m.group(3) else None
             if step == 0:
                 raise SettingsError(f"--frames {spec}: the step of {token!r} is zero")
+            _check_slice(spec, token, a, b, len(names), step)
             chosen.extend(range(len(names))[slice(a, b, step)])
         elif re.fullmatch(r"-?\d+", token):
             i = int(token)
@@ -770,6 +776,23 @@ def select_frames(names: list[str], spec: str | None) -> list[int]:
     if not chosen:
         raise SettingsError(f"--frames {spec}: selects no frame (the source has {len(names)})")
     return chosen
+
+
+def _check_slice(spec: str, token: str, a: int | None, b: int | None, n: int,
+                 step: int | None) -> None:
+    """Refuse a slice of the frames that reaches beyond them, as a single index beyond them
+    is refused: ``0:50`` of 10 frames would silently take 10."""
+    out = [v for v in (a, b) if v is not None and not -n <= v <= n]
+    if not out:
+        return
+    every = "" if step is None else f":{step}"
+    if a is not None and -n <= a < n:
+        hint = f"{a}:{n}{every}"
+    else:
+        hint = f"0:{n}{every}"
+    raise SettingsError(f"--frames {spec}: {token!r} reaches index {out[0]}, beyond the "
+                        f"source's {n} frames (indices 0 to {n - 1}); {hint} ends at the "
+                        "last one")
 
 
 def frame_mask(camera: Camera, mask: np.ndarray | None) -> np.ndarray | None:
@@ -842,6 +865,9 @@ def load_rig_frames(cameras: list[tuple[str, Source]], frames: str | None = None
 def _read_selected(src: Source, frames: str | None, clouds: dict | None) -> list[Frame]:
     idx = select_frames([f.name for f in src.frames], frames)
     out = [read_frame(src.frames[i], clouds) for i in idx]
+    for f in out:
+        # Carried with the frames, so that calibrating them is calibrating the folder.
+        f.options = {k: v for k, v in src.options.items() if k == "init_error"}
     # The readers note what they could not find (no intensity field, an odd time unit) per
     # file; say each thing once per source.
     notes: dict[str, Path] = {}

@@ -80,9 +80,11 @@ def dumps(doc, indent: int = 2) -> str:
     return json.dumps(strict_json(doc), indent=indent, allow_nan=False) + "\n"
 
 
-def write_run(result, out_dir: str | Path, frames: list[Frame] | None = None,
-              figures: bool = True, overlay_frame: int = 0) -> list[Path]:
-    """Write the run directory; returns the paths written.
+def write_outputs(result, out_dir: str | Path, frames: list[Frame] | None = None,
+                  figures: bool = True, overlay_frame: int = 0) -> list[Path]:
+    """Write a run's output files into ``out_dir``, beside whatever it holds; returns the
+    paths written. A run folder is written whole by :func:`paretocal.write_run`
+    (:mod:`paretocal.rundir`), which stages these files and replaces a previous run's.
 
     Parameters
     ----------

@@ -45,7 +45,7 @@ def weight_sweep(frames, T_init: np.ndarray, settings, weights, seeds,
     for k, (w1, seed) in enumerate(runs):
         t0 = time.perf_counter()
         s = settings.replace(objective={"w_edge": float(w1)}, search={"seed": int(seed)})
-        r = calibrate(frames, T_init, s)
+        r = calibrate(frames, T_init, s, dataset_options=False)    # the study's settings
         row = {"w1": float(w1), "w2": round(1.0 - float(w1), 6), "seed": int(seed),
                "f1": float(r.front.F[r.chosen, 0]), "n": r.n_points,
                "x": r.front.X[r.chosen, :6].copy(), "T": r.T_cam_lidar,

@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from ... import __version__
-from ...config import Settings
+from ...config import Settings, dataset_settings
 from ...errors import InputError, ParetocalError
 from ...geometry import pose_error
 from ...io.atomic import atomic_write_text
-from ...io.layouts import load_frames
-from ...report.results import dumps, write_run
+from ...io.layouts import load_frames, source_options
+from ...report.results import dumps, write_outputs
 from ...search.problem import VARIABLES, bounds
 from .epsilon import epsilon_constraint
 from .innovization import correlations, findings, trends
@@ -115,8 +115,9 @@ def _eps_values(F: np.ndarray, count: int) -> np.ndarray:
     return np.geomspace(max(floor, hi / 100), hi, count)
 
 
-def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Settings | None = None,
-              plan: StudyPlan | None = None, progress=None) -> dict:
+def run_study(source, out_dir, T_init: np.ndarray | None = None,  # noqa: PLR0913
+              settings: Settings | None = None, plan: StudyPlan | None = None, progress=None,
+              dataset_options: bool = True) -> dict:
     """Run every study and write its files to ``out_dir``.
 
     Parameters
@@ -130,6 +131,10 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     plan : StudyPlan, optional
     progress : callable, optional
         ``progress(stage, done, total)``; stages are the study names.
+    dataset_options : bool
+        What the dataset states (calib.yaml's ``init_error``) replaces the defaults the
+        settings leave, for every study (:func:`~paretocal.config.dataset_settings`, as
+        :func:`~paretocal.calibrate` does); False: the settings are final.
 
     Returns
     -------
@@ -151,6 +156,8 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     frames = frames[:: plan.frame_stride]
     if not frames:
         raise InputError(f"{source}: no frames to study")
+    # Decided once, for every study: their boxes are the calibration's.
+    settings = dataset_settings(settings, source_options(frames) if dataset_options else {})
     T_init, T_ref = resolve_init(frames, T_init)
     T_arg = T_init if T_ref is not None else None
     timings: dict[str, float] = {}
@@ -162,10 +169,10 @@ def run_study(source, out_dir, T_init: np.ndarray | None = None, settings: Setti
     # 1, 2, 5: the calibration itself.
     t0 = time.perf_counter()
     tick("pareto_front", 0)
-    result = calibrate(frames, T_arg, settings,
+    result = calibrate(frames, T_arg, settings, dataset_options=False,
                        progress=(lambda s, d, t: progress(f"calibration: {s}", d, t))
                        if progress else None)
-    write_run(result, out / "calibration", frames)
+    write_outputs(result, out / "calibration", frames)
     timings["calibration"] = time.perf_counter() - t0
     tick("pareto_front")
     obj, nsga_front = result.objective, result.nsga_front

@@ -48,8 +48,10 @@ function plotFront(box, D, onPick) {
   text(P.x_title, {x: L + pw / 2, y: Ht - 10, "text-anchor": "middle", "font-size": 13}, svg);
   text(P.y_title, {x: 16, y: T + ph / 2, "text-anchor": "middle", "font-size": 13,
                    transform: "rotate(-90 16 " + (T + ph / 2) + ")"}, svg);
-  text("\u25cf Pareto front    \u2605 " + P.chosen_label + "    \u25cb shown in the viewer",
-       {x: L, y: 16, "font-size": 12}, svg);
+  // The key on one line where it fits, else on two.
+  var key = "\u25cf Pareto front    \u2605 " + P.chosen_label, shown = "\u25cb shown in the viewer";
+  if (Wd >= 560) text(key + "    " + shown, {x: L, y: 16, "font-size": 12}, svg);
+  else { text(key, {x: L, y: 13, "font-size": 12}, svg); text(shown, {x: L, y: 28, "font-size": 12}, svg); }
   var cmin = 0, cmax = 1;
   if (P.color) {
     cmin = Math.min.apply(null, P.color); cmax = Math.max.apply(null, P.color);

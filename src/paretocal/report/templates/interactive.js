@@ -405,8 +405,12 @@
     document.getElementById("colour-groups").disabled = true;
   }
   document.addEventListener("keydown", function (ev) {
-    var t = ev.target && ev.target.tagName;
-    if (t === "INPUT" || t === "TEXTAREA" || t === "SELECT") return;
+    // The arrows are the frames' everywhere but where they edit a value: a text field, a
+    // list, a slider, or a group of radio buttons (which the arrows move through). A focused
+    // checkbox or button has no use for them.
+    var t = ev.target, tag = t && t.tagName;
+    if (tag === "TEXTAREA" || tag === "SELECT" || (t && t.isContentEditable)) return;
+    if (tag === "INPUT" && !/^(checkbox|button|submit|reset)$/.test(t.type)) return;
     if (ev.key === "ArrowRight") { pick(Math.min(D.frames.length - 1, S.frame + 1)); ev.preventDefault(); }
     else if (ev.key === "ArrowLeft") { pick(Math.max(0, S.frame - 1)); ev.preventDefault(); }
   });
