@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
+from .board import Board
 
 
 @dataclass(eq=False)
@@ -52,6 +53,9 @@ class Frame:
         image. None: every pixel.
     credit : str or None
         The data's credit line for figures (KITTI's for KITTI sources, calib.yaml's ``credit``).
+    board : Board or None
+        The checkerboard the frames show (calib.yaml's ``board:`` or a ``board.yaml`` beside
+        it); None for a recording without one.
     """
 
     name: str
@@ -68,6 +72,7 @@ class Frame:
     sensor_pose: np.ndarray | None = None
     mask: np.ndarray | None = None
     credit: str | None = None
+    board: Board | None = None
 
     @property
     def size(self) -> tuple[int, int]:
