@@ -123,3 +123,123 @@ def test_bad_boards_exit_2_from_the_command_line(data, tmp_path, capfd):
     both = variant(lce(data, "walkway_b"), tmp_path / "w", board="file",
                    edit=lambda c: c.update(board={"kind": "checkerboard"}))
     bad_cli(capfd, "check", both, expect=("board is given here and in",))
+
+
+# --- the board in the image ---------------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def lce_frames(data):
+    """Every frame of both LCE-Calib recordings, by recording."""
+    return {name: load_frames(lce(data, name)) for name in LCE}
+
+
+@pytest.fixture(scope="session")
+def lce_views(lce_frames):
+    from paretocal.features.board import find_board
+
+    return {name: [find_board(f.image, f.camera, f.board) for f in frames]
+            for name, frames in lce_frames.items()}
+
+
+@pytest.mark.parametrize("name", LCE)
+def test_corners_are_found_in_every_frame_and_fit_the_lens_model(lce_frames, lce_views, name):
+    import cv2
+
+    views = lce_views[name]
+    found = [v for v in views if v is not None]
+    assert len(found) >= 0.9 * len(views)
+    assert len(found) == len(views)                      # measured: 29 of 29, 15 of 15
+    for f, v in zip(lce_frames[name], views):
+        assert v.rms_px < 1.0 and v.ordered == 1.0
+        assert np.isclose(np.linalg.norm(v.normal), 1.0) and v.normal @ v.centre_cam < 0
+        # OpenCV's own undistortion and solver agree with the pose through the lens model.
+        cam = f.camera
+        xy = cv2.undistortPoints(v.corners_uv.reshape(-1, 1, 2), cam.K, np.array(cam.D))
+        ok, rvec, tvec = cv2.solvePnP(f.board.corners_m(), xy, np.eye(3), None)
+        R = cv2.Rodrigues(rvec)[0]
+        n_cv = R[:, 2] * np.sign(-(R[:, 2] @ tvec.ravel()))
+        assert np.degrees(np.arccos(min(1.0, n_cv @ v.normal))) < 0.5
+        assert abs(float(-(n_cv @ tvec.ravel())) - v.distance_m) < 0.01 * v.distance_m
+        # The outline is the board's size, around the corners' centre.
+        o = v.outline_cam
+        assert np.isclose(np.linalg.norm(o[1] - o[0]), 0.767) and \
+            np.isclose(np.linalg.norm(o[3] - o[0]), 0.626)
+        assert np.allclose(o.mean(axis=0), v.centre_cam)
+
+
+def _look_at(centre, tilt_deg):
+    """A board pose at ``centre`` (camera frame, m) facing the camera, turned by ``tilt_deg``
+    (yaw, pitch, roll about its own axes)."""
+    from paretocal.geometry import rotation_zyx
+
+    z = -np.asarray(centre, float) / np.linalg.norm(centre)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z]) @ rotation_zyx(*tilt_deg)
+    T[:3, 3] = centre
+    return T
+
+
+#: Lenses at half the LCE camera's size (a quarter of the rays to render), and how near each
+#: sees the board with squares of 14-20 px (its focal length at the centre: f, f, f / (1 + xi)).
+SYNTH_CAMERAS = {
+    "pinhole": dict(K=[[450, 0, 320], [0, 450, 180], [0, 0, 1]], D=(-0.44, 0.23, 0, 0, -0.07)),
+    "fisheye": dict(K=[[175, 0, 320], [0, 175, 180], [0, 0, 1]], model="fisheye",
+                    D=(0.05, -0.01, 0.002, 0)),
+    "mei": dict(K=[[250, 0, 320], [0, 250, 180], [0, 0, 1]], model="mei", xi=1.2,
+                D=(-0.1, 0.02, 0, 0)),
+}
+SYNTH_NEAR = {"pinhole": 1.0, "fisheye": 0.5, "mei": 0.35}
+
+
+@pytest.mark.parametrize("model", SYNTH_CAMERAS)
+@pytest.mark.parametrize("centre, tilt", [((0.0, 0.0, 1.6), (10, 20, 10)),
+                                          ((0.9, 0.3, 1.5), (30, -20, 25)),
+                                          ((-1.3, -0.3, 1.2), (-15, 25, -10))])
+def test_an_exact_board_is_found_through_every_lens_model(model, centre, tilt):
+    from helpers import render_board
+
+    from paretocal.camera import Camera
+    from paretocal.features.board import find_board
+
+    cam = Camera(width=640, height=360, **SYNTH_CAMERAS[model])
+    board = Board((9, 7), 0.07, (0.767, 0.626))
+    centre = SYNTH_NEAR[model] * np.array(centre)
+    T = _look_at(centre, tilt)
+    uv = cam.project_camera_points(centre)[0]
+    if not (np.isfinite(uv).all() and 0 < uv[0] < cam.width):
+        pytest.skip("outside this lens's image")
+    v = find_board(render_board(cam, board, T), cam, board)
+    # Squares of 8-19 px at this size: the pose to a fraction of a degree and a centimetre.
+    assert v is not None and v.rms_px < 0.3
+    assert np.degrees(np.arccos(min(1.0, v.normal @ T[:3, 2]))) < 1.0
+    assert np.linalg.norm(v.centre_cam - T[:3, 3]) < 0.005 * np.linalg.norm(centre)
+
+
+def test_the_perspective_view_maps_corners_back_through_the_lens():
+    from helpers import render_board
+
+    import cv2
+
+    from paretocal.camera import Camera
+    from paretocal.features.board import _from_view, perspective_view
+
+    cam = Camera(width=640, height=360, **SYNTH_CAMERAS["fisheye"])
+    board = Board((9, 7), 0.07, (0.767, 0.626))
+    T = _look_at((-0.8, 0.2, 1.0), (0, 10, 0))
+    img = render_board(cam, board, T)
+    view, K_view = perspective_view(img, cam)
+    ok, c = cv2.findChessboardCornersSB(view, board.inner, flags=cv2.CALIB_CB_ACCURACY)
+    assert ok
+    back = _from_view(c.reshape(-1, 2).astype(float), K_view, cam)
+    truth = cam.project_camera_points(board.corners_m() @ T[:3, :3].T + T[:3, 3])[0]
+    err = np.min(np.linalg.norm(back[:, None] - truth[None], axis=2), axis=1)
+    assert np.median(err) < 0.3
+
+
+def test_a_board_described_wrong_is_not_found(lce_frames):
+    from paretocal.features.board import find_board
+
+    f = lce_frames["walkway_b"][0]
+    assert find_board(f.image, f.camera, Board((8, 7), 0.07, (0.767, 0.626))) is None
