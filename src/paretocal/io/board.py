@@ -66,7 +66,8 @@ class Board:
     @property
     def margin_m(self) -> tuple[float, float]:
         """The white margin on each side, along the width and the height (m)."""
-        return tuple((s - n * self.square_m) / 2.0 for s, n in zip(self.size_m, self.squares))
+        (w, h), (nx, ny) = self.size_m, self.squares
+        return (w - nx * self.square_m) / 2.0, (h - ny * self.square_m) / 2.0
 
     def corners_m(self) -> np.ndarray:
         """The inner corners in the board's frame, shape (nx * ny, 3) (m): origin at the board's
@@ -158,23 +159,23 @@ def read_board(section, path: str | Path, where: str = "board") -> Board:
         raise InputError(f"{path}: {where}.square_m must be a positive number of metres, got "
                          f"{quote(section['square_m'])}")
     size = _pair(section["size_m"])
-    sizes = None if size is None else [_number(v) for v in size]
-    if sizes is None or any(v is None or v <= 0 for v in sizes):
+    sizes = [] if size is None else [_number(v) for v in size]
+    if size is None or any(v is None or v <= 0 for v in sizes):
         raise InputError(f"{path}: {where}.size_m must be two positive numbers of metres (the "
                          f"whole board's width and height), got {quote(section['size_m'])}")
-    w, h = float(sizes[0]), float(sizes[1])
+    w, h = (float(v) for v in size or ())
     for name, s, n in (("width", w, nx), ("height", h, ny)):
         if s < n * square - 1e-9:
             raise InputError(f"{path}: {where}.size_m: the board's {name} {s:g} m is smaller "
                              f"than its {n} squares of {square:g} m ({n * square:g} m)")
     if section.get("margin_mm") is not None:
         margin = _pair(section["margin_mm"])
-        got = None if margin is None else [_number(v) for v in margin]
-        if got is None or any(v is None for v in got):
+        got = [] if margin is None else [_number(v) for v in margin]
+        if margin is None or any(v is None for v in got):
             raise InputError(f"{path}: {where}.margin_mm must be two numbers of millimetres, "
                              f"got {quote(section['margin_mm'])}")
         want = [1000.0 * (w - nx * square), 1000.0 * (h - ny * square)]
-        if any(abs(float(g) - m) > MARGIN_TOL_MM for g, m in zip(got, want)):
+        if any(abs(float(g) - m) > MARGIN_TOL_MM for g, m in zip(margin or (), want)):
             raise InputError(f"{path}: {where}.margin_mm {quote(section['margin_mm'])} "
                              f"disagrees with size_m minus the squares ({want[0]:.0f}, "
                              f"{want[1]:.0f} mm)")
