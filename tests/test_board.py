@@ -337,3 +337,110 @@ def test_the_closed_form_is_exact_and_says_what_parallel_boards_leave_free():
     assert not c.ok
     assert any("rotation about the camera's optical axis (z) free" in t for t in c.notes)
     assert any("translation along" in t for t in c.notes)
+
+
+# --- the board's terms of the objective ---------------------------------------------------------
+
+def test_the_board_kernel_matches_its_oracle_and_its_optimum_is_the_refined_start(lce_starts):
+    from paretocal.geometry import apply_correction
+    from paretocal.objective.board import board_sums, board_sums_numpy, board_terms
+
+    start = lce_starts["walkway_b"]
+    rng = np.random.default_rng(7)
+    X = rng.normal(size=(64, 6)) * [0.02, 0.02, 0.02, 0.5, 0.5, 0.5]
+    X[0] = 0.0
+    T = apply_correction(start.T, X)
+    a, b = board_sums(start.scene, T), board_sums_numpy(start.scene, T)
+    assert np.allclose(a[0], b[0], rtol=1e-12, atol=1e-12)
+    assert np.allclose(a[1], b[1], rtol=1e-12, atol=1e-12)
+    cost = board_terms(start.scene, T)["cost"].sum(axis=1)
+    assert np.argmin(cost) == 0                     # the refined start is the board's optimum
+    # At the optimum a return costs about its noise: rho(1) / rho(3) of the truncation.
+    per_frame = board_terms(start.scene, T[:1])["cost"][0]
+    assert np.all(per_frame < 0.6 * start.scene.truncation_px)
+
+
+def test_the_board_objective_adds_the_boards_to_their_frames_only(lce_frames, lce_starts):
+    from paretocal.board import board_settings
+    from paretocal.config import Settings
+    from paretocal.objective.board import board_terms
+    from paretocal.stage import Stage
+
+    frames = lce_frames["walkway_b"][:5]
+    start = lce_starts["walkway_b"]
+    keep = [0, 2, 4]
+    # Three of five frames show the board (their board terms are those of frames 0, 2, 4).
+    sub = start.scene.select(keep)
+    assert sub.names == ("00", "02", "04") and sub.n_boards == 3
+    assert np.array_equal(sub.frames, keep)
+    st = Stage(frames, start.T, start.T, board_settings(Settings()), board=sub)
+    X = np.zeros((3, 7))
+    X[:, 6] = st.n_max
+    X[1, 3] = 0.5
+    X[2, 0] = 0.03
+    both = st.objective.chamfer(X)
+    edges = st.objective.edges.chamfer(X)
+    added = both["per_frame"] - edges["per_frame"]
+    assert np.allclose(added[:, [1, 3]], 0.0)
+    cost = board_terms(sub, st.objective.transforms(X))["cost"]
+    assert np.allclose(added[:, keep], cost)
+    assert np.allclose(both["f1"], edges["f1"] + cost.sum(axis=1) / 5)
+    assert np.all(both["board"][1:] > both["board"][0])      # off the board's optimum costs
+    assert np.allclose(st.objective.evaluate(X)[:, 1], st.objective.edges.cost(X)["f2"])
+
+
+# --- the verdict ------------------------------------------------------------------------------
+
+def test_a_board_found_nowhere_and_parallel_boards_are_reasons_in_words(lce_frames):
+    import dataclasses
+
+    from paretocal.board import RECORD_ADVICE, BoardStart, board_start
+    from paretocal.config import Settings
+    from paretocal.search.board import Conditioning
+
+    wrong = Board((8, 5), 0.07, (0.767, 0.626))
+    frames = [dataclasses.replace(f, board=wrong) for f in lce_frames["walkway_b"][:3]]
+    start = board_start(frames, Settings())
+    assert not start.applied and start.found_in_images == 0
+    assert start.verdict_reasons() == [
+        "the board (8 x 5 squares of 7 cm) was found in no frame's image: check board: in "
+        "calib.yaml (the squares, not the inner corners)"]
+    note = ("the board poses leave the rotation about the camera's optical axis (z) free (the "
+            "boards' normals spread 0.3 deg, +-4 deg): tilt the board differently between "
+            "frames")
+    parallel = BoardStart(board=wrong, conditioning=Conditioning(0.3, 4.0, (0, 1, 0), 0.2, 5,
+                                                                 (note,)),
+                          reasons=[note])
+    assert parallel.verdict_reasons() == [f"{note}; {RECORD_ADVICE}"]
+    assert "while driving" not in RECORD_ADVICE
+
+
+@pytest.mark.slow
+def test_a_board_recording_calibrates_from_no_guess_through_the_command_line(data, tmp_path,
+                                                                           capfd):
+    """calib.yaml without T_cam_lidar: the closed form is the start; a short search; the
+    board's stages timed; result.json says what the board gave."""
+    import json
+
+    from helpers import run_cli
+
+    from paretocal.geometry import pose_error
+
+    src = lce(data, "walkway_b")
+    root = variant(src, tmp_path / "v", board="file", with_T=False)
+    code, out, err = run_cli(capfd, "calibrate", root, "--out", tmp_path / "o", "--frames",
+                             "0:6", "--pop", "40", "--gens", "12", "--no-figures", "--quiet")
+    assert code == 0, err
+    doc = json.loads((tmp_path / "o" / "result.json").read_text())
+    b = doc["board"]
+    assert b["applied"] and b["used"] == 6 and b["found_in_images"] == 6
+    for k in ("board", "board_image", "board_cloud", "board_fit"):
+        assert doc["timings_s"][k] > 0
+    assert doc["config"]["search"]["gens"] == 3 and doc["config"]["features"]["reselect"] is False
+    T_ref = np.array(yaml.safe_load((src / "calib.yaml").read_text())["T_cam_lidar"])
+    e = pose_error(np.array(doc["T_cam_lidar"]), T_ref)
+    assert e["rotation_deg"] < 1.0 and e["translation_cm"] < 5.0, e    # 6 boards: 0.71 / 3.1
+    ev = b["evidence"]
+    assert len(ev["per_frame"]) == 6 and set(ev["lobo_se"]) == {"x", "y", "z", "yaw", "pitch",
+                                                               "roll"}
+    assert "while driving" not in " ".join(doc["reliability"]["reasons"])

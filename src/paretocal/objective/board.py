@@ -100,6 +100,26 @@ class BoardScene:
     def n_boards(self) -> int:
         return len(self.frames)
 
+    def select(self, boards) -> "BoardScene":
+        """The scene of some of its boards (indices into its boards), in that order."""
+        import dataclasses
+
+        boards = np.asarray(boards, dtype=np.int64)
+
+        def take(values, start):
+            parts = [values[start[j]:start[j + 1]] for j in boards]
+            sizes = [len(p) for p in parts]
+            stacked = np.vstack(parts) if parts else values[:0]
+            return stacked, np.r_[0, np.cumsum(sizes)].astype(np.int64)
+
+        points, point_start = take(self.points, self.point_start)
+        ends, end_start = take(self.ends, self.end_start)
+        return dataclasses.replace(
+            self, frames=self.frames[boards], names=tuple(self.names[j] for j in boards),
+            normal=self.normal[boards], distance=self.distance[boards],
+            T_cam_board=self.T_cam_board[boards], points=points, point_start=point_start,
+            ends=ends, end_start=end_start)
+
     @property
     def scale_px(self) -> float:
         """The cost of one noise-normalised unit of ``rho`` (px): ``truncation / rho(K)``."""
