@@ -193,6 +193,33 @@ def board_settings(settings: Settings) -> Settings:
                 "gens": max(1, int(round(SEARCH_SHARE * s.search.gens)))})
 
 
+def board_view(frames: list[Frame], settings: Settings, rings=None,
+               T: np.ndarray | None = None) -> BoardStart | None:
+    """The board stage for ``paretocal check`` and ``compare`` (None for frames without a
+    board): its ``scene`` holds the board's terms, found from the board alone; ``T`` (the
+    extrinsic judged) is recorded as the start given."""
+    if not has_board(frames):
+        return None
+    return board_start(frames, settings, rings, T_given=T)
+
+
+def board_summary(board: BoardStart, T: np.ndarray) -> dict:
+    """What a check writes of the board: :meth:`BoardStart.to_dict` and how far the board's
+    own optimum lies from ``T`` (``board_optimum_moved_deg``, ``_cm``; None when the board
+    gave none)."""
+    from .search.board import refine
+
+    out = board.to_dict()
+    moved = None
+    if board.scene is not None and board.scene.n_boards >= MIN_BOARDS:
+        moved = pose_error(refine(board.scene, np.asarray(T, dtype=np.float64)), T)
+    out["board_optimum_moved_deg"] = (None if moved is None
+                                      else round(float(moved["rotation_deg"]), 3))
+    out["board_optimum_moved_cm"] = (None if moved is None
+                                     else round(float(moved["translation_cm"]), 2))
+    return out
+
+
 def has_board(frames: list[Frame]) -> bool:
     """Whether the frames describe a board (calib.yaml's ``board:`` or a board.yaml)."""
     return any(f.board is not None for f in frames)
