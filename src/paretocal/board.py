@@ -315,9 +315,6 @@ def board_start(frames: list[Frame], settings: Settings, rings=None,
     views = [find_board(f.image, f.camera, f.board) if f.board is not None else None
              for f in frames]
     out.seconds["image"] = time.perf_counter() - t0
-    missing = [f.name for f, v in zip(frames, views) if v is None]
-    if missing:
-        log.info("the board was not found in the image of frame(s) %s", ", ".join(missing))
     if all(v is None for v in views):
         out.frames = [BoardFrame(f.name, None) for f in frames]
         out.reasons.append(f"the board ({board.squares[0]} x {board.squares[1]} squares of "
@@ -349,6 +346,11 @@ def board_start(frames: list[Frame], settings: Settings, rings=None,
                              cands[k][choice[k]] if k in choice else None,
                              *(_counts(out.scene, f.name)), used=k in used)
                   for k, f in enumerate(frames)]
+    unused = [f.name for f in out.frames if not f.used]
+    if unused:
+        log.warning("the board is not in the objective for frame(s) %s (not found in the image "
+                    "or the sweep, or off the others' fit); they serve the edges alone",
+                    ", ".join(unused))
     if T is not None and out.conditioning is not None and out.conditioning.ok:
         out.T = T
     elif T is not None:

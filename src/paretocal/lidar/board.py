@@ -264,18 +264,22 @@ def clusters(xyz: np.ndarray, rng: np.ndarray, gap_rad: float) -> list[np.ndarra
 def ransac_plane(xyz: np.ndarray, tol: float, rng: np.random.Generator,
                  trials: int = RANSAC_TRIALS) -> np.ndarray:
     """The inliers (bool, (N,)) of the plane through three of the points that holds most
-    points within ``tol`` (m)."""
-    best = np.zeros(len(xyz), bool)
-    for _ in range(trials):
-        s = xyz[rng.choice(len(xyz), 3, replace=False)]
-        n = np.cross(s[1] - s[0], s[2] - s[0])
-        norm = np.linalg.norm(n)
-        if norm < 1e-9:
-            continue
-        inl = np.abs((xyz - s[0]) @ (n / norm)) < tol
-        if inl.sum() > best.sum():
-            best = inl
-    return best
+    points within ``tol`` (m); the trials' planes are scored at once."""
+    idx = rng.choice(len(xyz), size=(trials, 3))
+    a, b, c = xyz[idx[:, 0]], xyz[idx[:, 1]], xyz[idx[:, 2]]
+    n = np.cross(b - a, c - a)
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 1e-9
+    if not ok.any():
+        return np.zeros(len(xyz), bool)
+    n, a = n[ok] / norm[ok, None], a[ok]
+    counts = np.zeros(len(n), np.int64)
+    for start in range(0, len(n), 50):                  # bounded memory: 50 planes at a time
+        d = np.abs(xyz @ n[start:start + 50].T - np.sum(a[start:start + 50] * n[start:start + 50],
+                                                         axis=1))
+        counts[start:start + 50] = np.sum(d < tol, axis=0)
+    k = int(np.argmax(counts))
+    return np.abs((xyz - a[k]) @ n[k]) < tol
 
 
 def fit_plane(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
