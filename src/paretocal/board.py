@@ -166,6 +166,21 @@ class BoardStart:
                 "evidence": None if self.evidence is None else self.evidence.to_dict(),
                 "seconds": {k: round(float(v), 2) for k, v in self.seconds.items()}}
 
+    def summary_line(self) -> str:
+        """What the board gave, in one line for the command line."""
+        n = len(self.frames)
+        line = (f"board: in {self.found_in_images} of {n} images and "
+                f"{sum(f.cloud is not None for f in self.frames)} of {n} sweeps, {self.used} "
+                "in the objective")
+        if self.T is None:
+            return line + "; no start from it: " + "; ".join(self.reasons)
+        line += "; the start from its closed form"
+        if self.T_given is not None:
+            e = pose_error(self.T, self.T_given)
+            line += (f", {float(e['rotation_deg']):.2f} deg / {float(e['translation_cm']):.1f} "
+                     "cm from the start given")
+        return line
+
     def verdict_reasons(self) -> list[str]:
         """The verdict's reasons from the board: why it gave no start (no board found, too few
         frames, board poses that leave an axis free), and its evidence's."""
@@ -524,8 +539,9 @@ class BoardEvidence:
         :data:`paretocal.search.basin.CLEAR_P`) and it lies beyond a usable calibration's
         tolerance and the board's own spread and floor.
     intervals : Intervals
-        The result's intervals: the boards' spread, the board's floor and the two views'
-        difference.
+        The result's intervals: per axis the larger of the two views' offsets from the result
+        combined with their own half-widths (``jackknife_se`` is the boards', ``bias`` the
+        rest).
     """
 
     per_frame: tuple
@@ -601,13 +617,16 @@ def board_evidence(objective, x: np.ndarray, settings: Settings,
     The board's optimum (its terms alone, :func:`~paretocal.search.board.refine` from the
     result), its leave-one-board-out spread and its floor, :func:`range_bias_floor`; the
     edges' local optimum (their terms alone) and their own 95 % half-widths, as the verdict
-    measures them for any recording; and the result's intervals, per axis
-    ``sqrt((1.96 se)^2 + f^2 + d^2)``: ``se`` the boards' jackknife standard error, ``f`` the
-    board's floor and ``d`` the two views' difference. The board and the edges share no
-    measurement (corners and returns on a plane; image edges and depth discontinuities), so
-    where either is unbiased the result, which the board dominates, lies within ``d`` of the
-    truth beyond the board's own spread and floor. The views disagree on an axis when ``d``
-    lies beyond what a usable calibration may be off (:data:`paretocal.search.basin.
+    measures them for any recording; and the result's intervals. The board and the edges share
+    no measurement (corners and returns on a plane; image edges and depth discontinuities), so
+    the truth lies within its own 95 % interval of whichever view is unbiased: per axis, the
+    half-width is the larger of ``sqrt(d_board^2 + h_board^2)`` and ``sqrt(d_edges^2 +
+    h_edges^2)``, ``d`` each view's optimum's offset from the result and ``h`` its own
+    half-width: the board's ``sqrt((1.96 se)^2 + f^2)`` (``se`` the boards' jackknife standard
+    error, ``f`` its floor), the edges' as the verdict measures it for any recording (an axis
+    the edges do not determine counts the board's alone). The frames' agreement cannot show a
+    bias they all share; the other view can. The views disagree on an axis when their
+    difference lies beyond what a usable calibration may be off (:data:`paretocal.search.basin.
     USABLE_DEG`, :data:`~paretocal.search.basin.USABLE_M`: within that, the difference widens
     the intervals instead) and beyond the board's own half-width (``sqrt((1.96 se)^2 +
     f^2)``), and the edges themselves clearly prefer their optimum to the board's, frame by
@@ -652,8 +671,11 @@ def board_evidence(objective, x: np.ndarray, settings: Settings,
     disagree = () if not pref["p"] < CLEAR_P else tuple(
         a for a, v, w, u in zip(AXES, diff, board_half, usable)
         if np.isfinite(w) and abs(v) > max(w, u))
+    # The truth lies within its own 95 % interval of whichever view is unbiased: per axis, the
+    # larger of the two views' offsets from the result combined with their half-widths.
+    half = np.fmax(np.hypot(d_board, board_half), np.hypot(d_edges, edges_half))
     iv = intervals(se, per_px, align, settings.search, sampling_px=sampling,
-                   bias=np.hypot(floor, diff))
+                   bias=np.sqrt(np.maximum(half ** 2 - (Z95 * se) ** 2, 0.0)))
     p = plane_residuals(scene, T[None])[0]
     o = outline_residuals(scene, T[None])[0]
     rows = []

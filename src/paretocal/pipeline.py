@@ -89,7 +89,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     with _timed(timings, "load", progress):
         frames = _load(source, settings)
     check_population_memory(settings.search.pop, len(frames))
-    given = T_init is not None or frames[0].T_ref is not None or not has_board(frames)
+    given = T_init is not None or frames[0].T_ref is not None or not has_board(frames) or any(
+        f.camera.mount is not None for f in frames)
     T_init, T_ref = resolve_init(frames, T_init) if given else (None, None)
     if lidar is not None:
         if lidar.settings_key != lidar_settings_key(settings):
@@ -108,7 +109,10 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
     board = None
-    if has_board(frames):
+    if has_board(frames) and any(f.camera.mount is not None for f in frames):
+        log.warning("a joint calibration of several cameras does not use the board yet: "
+                    "calibrate each camera alone (without --joint) to use it")
+    elif has_board(frames):
         with _timed(timings, "board", progress):
             board = board_start(frames, settings, rings, T_given=T_init)
         timings.update({f"board_{k}": v for k, v in board.seconds.items()})

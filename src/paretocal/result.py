@@ -104,6 +104,9 @@ class CalibrationResult:
         The verdict's own checks (restart, image-cloud agreement, per-axis intervals).
     wide : dict or None
         What the wide start did; None when the stated error did not ask for it.
+    board : BoardStart or None
+        What the board stage found (:class:`paretocal.board.BoardStart`); None for a recording
+        without a board.
     sweeps : list or None
         The frames as calibrated (de-skewed when the motion was compensated).
     objective : CalibrationObjective or None

@@ -308,13 +308,3 @@ class BoardObjective(CalibrationObjective):
         share = cost.sum(axis=1) / per_frame.shape[1]
         out.update(per_frame=per_frame, f1=out["f1"] + share, board=share)
         return out
-
-    def evaluate(self, X: np.ndarray) -> np.ndarray:
-        """``F`` (C, 2): ``[f1, f2]``, f1 with the board's terms.
-
-        Parameters
-        ----------
-        X : ndarray, shape (C, 7)
-            Candidates ``[x, y, z, yaw, pitch, roll, n]`` (m, deg, points per frame).
-        """
-        return np.column_stack([self.chamfer(X)["f1"], self.cost(X)["f2"]])
