@@ -283,9 +283,9 @@ def test_the_board_is_found_in_every_sweep_and_lies_on_the_image_board(lce_frame
 @pytest.mark.parametrize("name", LCE)
 def test_the_closed_form_needs_no_guess_and_is_refined_to_the_reference(lce_frames, lce_starts,
                                                                         name):
-    """Measured: the closed form 0.76 deg / 1.6 cm (walkway_a) and 0.41 deg / 3.5 cm
+    """Measured: the closed form 0.76 deg / 1.6 cm (walkway_a) and 0.38 deg / 3.1 cm
     (walkway_b) from the reference, refined by the boards' residuals 0.38 deg / 1.1 cm and
-    0.41 deg / 3.0 cm; the rotation about the boards' mean normal to +-0.27 and 0.37 deg."""
+    0.39 deg / 2.8 cm; the rotation about the boards' mean normal to +-0.27 and 0.37 deg."""
     from paretocal.geometry import pose_error
 
     start = lce_starts[name]

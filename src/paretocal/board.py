@@ -41,7 +41,7 @@ ASSOCIATION_ROUNDS = 3
 REFINE_ROUNDS = 2
 #: Share of the search's generations after the board's start: the search there traces the
 #: front near a start within a fraction of a degree, it does not look for the basin (on
-#: walkway_a: 0.186 deg / 0.69 cm from the reference with 30 generations, 0.204 deg / 0.69 cm
+#: walkway_a: 0.232 deg / 0.71 cm from the reference with 30 generations, 0.223 deg / 0.70 cm
 #: with 120).
 SEARCH_SHARE = 0.25
 #: The fewest boards seen by both sensors for a closed form.
