@@ -137,3 +137,33 @@ def load_benchmark(name: str):
     sys.modules[spec.name] = mod
     spec.loader.exec_module(mod)
     return mod
+
+
+def render_board(camera, board, T_cam_board, background: int = 110, supersample: int = 2):
+    """An exact synthetic image (H, W) uint8 of ``board`` at ``T_cam_board`` (board frame as
+    :class:`paretocal.io.board.Board` defines it) seen through ``camera``'s lens model: dark
+    squares 30 (the corner squares), light squares and margin 210, elsewhere ``background``;
+    each pixel the mean of ``supersample``^2 rays."""
+    h, w = camera.height, camera.width
+    k = supersample
+    v, u = np.mgrid[0:h * k, 0:w * k].astype(np.float64)
+    uv = np.stack([(u + 0.5) / k - 0.5, (v + 0.5) / k - 0.5], axis=-1)
+    rays = camera.unproject(uv)
+    R, t = T_cam_board[:3, :3], T_cam_board[:3, 3]
+    n = R[:, 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (n @ t) / (rays @ n)
+    hit = rays * s[..., None]
+    local = (hit - t) @ R                                   # board frame
+    x, y = local[..., 0], local[..., 1]
+    img = np.full(s.shape, float(background))
+    on = np.isfinite(s) & (s > 0) & (np.abs(x) <= board.size_m[0] / 2) & \
+        (np.abs(y) <= board.size_m[1] / 2)
+    img[on] = 210.0
+    sx, sy = board.squares
+    i = np.floor((x + sx * board.square_m / 2) / board.square_m)
+    j = np.floor((y + sy * board.square_m / 2) / board.square_m)
+    sq = on & (i >= 0) & (i < sx) & (j >= 0) & (j < sy)
+    img[sq & ((i + j) % 2 == 0)] = 30.0
+    img = img.reshape(h, k, w, k).mean(axis=(1, 3))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)

@@ -62,7 +62,7 @@ SYNOPSIS = re.compile(r"\b[A-Z][A-Z_]*[A-Z]\b(?!=)|\[--")
 #: Pages whose commands must run on the sample data (the issue's "done when").
 REQUIRED_PAGES = ("getting-started.md", "preparing-data.md")
 #: Pages whose commands take longer (a check of 20 frames, a Dask cluster): marked slow.
-SLOW_PAGES = ("trusting.md", "fleets.md")
+SLOW_PAGES = ("trusting.md", "fleets.md", "board.md")
 #: The modules the API reference documents besides the public names (``paretocal.__all__``).
 CORE_MODULES = ("geometry", "camera", "objective", "search", "quality", "lidar", "features",
                 "check", "verdict", "result")

@@ -105,7 +105,7 @@ class TestGenericFolder:
          r"xi, mask\)$"),
         (lambda c: c.update(T_cam_lidr=c.pop("T_cam_lidar")),
          r"calib.yaml: unknown key\(s\) T_cam_lidr \(expected camera, camera_info, "
-         r"T_cam_lidar, lidar_pose, points, mask, init_error, credit\)$"),
+         r"T_cam_lidar, lidar_pose, points, mask, init_error, credit, board\)$"),
     ])
     def test_malformed_calib(self, tmp_path, raw_frames, edit, what):
         import yaml

@@ -16,7 +16,7 @@ RANKS = {
     "features": 5, "egomotion": 5,
     "objective": 6, "testing": 6,
     "search": 7, "quality": 7, "decide": 7,
-    "inputs": 8, "stage": 8, "crosscheck": 8, "verdict": 8, "result": 8, "wide": 8,
+    "inputs": 8, "stage": 8, "crosscheck": 8, "verdict": 8, "result": 8, "wide": 8, "board": 8,
     "pipeline": 9, "check": 9, "depth": 9, "extract": 9,
     "report": 10,
     "apps": 11, "rundir": 11,

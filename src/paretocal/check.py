@@ -102,7 +102,12 @@ class CheckReport:
     motion : MotionAgreement or None
         The rotation against the recording's motion (:func:`~paretocal.crosscheck.motion_agreement`);
         None when not looked at (fewer than :data:`~paretocal.crosscheck.MIN_FRAMES` frames,
-        or ``decision.motion_check`` off).
+        ``decision.motion_check`` off, or a board recording, whose rig stands still).
+    board : dict or None
+        For a recording with a board (its terms are then in the objective checked): what the
+        board stage found (:meth:`paretocal.board.BoardStart.to_dict`) and ``moved_deg``,
+        ``moved_cm``: how far the board's own optimum lies from the extrinsic checked. None
+        without a board.
     too_few : bool
         The frames are too few to judge: a figure that decides the verdict is known, from the
         frames themselves, only to a 95 % spread that reaches its threshold (a note says
@@ -130,6 +135,7 @@ class CheckReport:
     features: FeatureCounts
     extrinsic_from: str | None = None
     motion: MotionAgreement | None = None
+    board: dict | None = None
     too_few: bool = False
     spread_deg: float = np.nan
     spread_m: float = np.nan
@@ -187,6 +193,8 @@ class CheckReport:
             out["extrinsic_from"] = self.extrinsic_from
         if self.motion is not None:
             out["motion"] = self.motion.to_dict()
+        if self.board is not None:
+            out["board"] = self.board
         return out
 
     @classmethod
@@ -220,7 +228,8 @@ class CheckReport:
                    features=FeatureCounts.from_dict(doc.get("features") or {}),
                    extrinsic_from=doc.get("extrinsic_from"),
                    motion=(MotionAgreement.from_dict(doc["motion"]) if doc.get("motion")
-                           else None))
+                           else None),
+                   board=doc.get("board"))
 
     def with_source(self, extrinsic_from: str) -> "CheckReport":
         """The report naming where the extrinsic checked came from.
@@ -273,6 +282,7 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         on (fewer frames than a calibration needs to be trusted), with what to do
         (:meth:`CheckReport.to_dict`: the JSON ``paretocal check --out`` writes).
     """
+    from .board import board_summary, board_view
     from .inputs import prepare_lidar
     from .stage import Stage, feature_counts
 
@@ -285,12 +295,14 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
     # The LiDAR steps of a calibration (the sensor located in its cloud, the rings, the
     # sweeps de-skewed): without them a cloud stored in a vehicle frame gives noise for edges.
     lidar = prepare_lidar(frames, settings, [(frames[0].camera, T)])
+    board = board_view(lidar.frames, settings, lidar.rings, T)
     stage = Stage(lidar.frames, T, T, settings, lambda d, t: tick("features", d, t),
-                  rings=lidar.rings)
+                  rings=lidar.rings, board=None if board is None else board.scene)
     obj = stage.objective
     x0 = np.zeros(7)
     x0[6] = stage.n_max
-    with_motion = settings.decision.motion_check and len(frames) >= MIN_FRAMES
+    with_motion = (settings.decision.motion_check and len(frames) >= MIN_FRAMES
+                   and board is None)
     steps = 4 if with_motion else 3
     frac, gain = neighbour_fraction(obj, x0, NEIGHBOUR_STEP)
     tick("check", 1, steps)
@@ -336,7 +348,8 @@ def check_extrinsic(frames: list[Frame], T: np.ndarray, settings: Settings | Non
         neighbour_fraction=frac, best_neighbour_gain_px=gain,
         neighbour_step=NEIGHBOUR_STEP.copy(), T_checked=T, T_local_optimum=T_opt,
         quality=quality, frames=tuple(f.name for f in frames),
-        features=feature_counts(stage.feats), motion=motion, too_few=too_few,
+        features=feature_counts(stage.feats), motion=motion,
+        board=None if board is None else board_summary(board, T), too_few=too_few,
         spread_deg=spread_deg, spread_m=spread_m)
 
 
@@ -528,6 +541,7 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
     -------
     Comparison
     """
+    from .board import board_view
     from .inputs import prepare_lidar
     from .search.basin import CLEAR_P, paired_preference
     from .stage import Stage
@@ -544,13 +558,15 @@ def compare_extrinsics(T_a: np.ndarray, T_b: np.ndarray, frames: list[Frame] | N
     settings = (settings or Settings()).validate()
     cam = frames[0].camera
     lidar = prepare_lidar(frames, settings, [(cam, T_a), (cam, T_b)])
+    board = board_view(lidar.frames, settings, lidar.rings, T_a)
     prefs, pixels = [], []
     scores = np.full((2, len(frames)), np.nan)
     for name, T_view in (("A", T_a), ("B", T_b)):
         stage = Stage(lidar.frames, T_view, T_view, settings,
                       None if progress is None else
                       (lambda d, t, v=name: progress(f"features ({v}'s view)", d, t)),
-                      rings=lidar.rings, sampling=False)
+                      rings=lidar.rings, sampling=False,
+                      board=None if board is None else board.scene)
         obj = stage.objective
         x = np.zeros((2, 7))
         x[:, :6] = correction_between(T_view, np.stack([T_a, T_b]))

@@ -29,6 +29,7 @@ from .search.checkpoint import Checkpoint, fingerprint
 from .inputs import (LidarSteps, compensate_motion, lidar_settings_key, locate_lidar,  # noqa: F401
                      resolve_init, sweep_rings, warn_rings, warn_unlocated, describe_inputs)
 from .objective import get_evaluator
+from .board import BoardStart, board_evidence, board_settings, board_start, has_board
 from .wide import after_settings, photo_check, wanted, wide_start
 from .objective.cost import CostModel, time_per_candidate
 from .result import CalibrationResult, Front  # noqa: F401
@@ -91,7 +92,9 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     with _timed(timings, "load", progress):
         frames = _load(source, settings)
     check_population_memory(settings.search.pop, len(frames))
-    T_init, T_ref = resolve_init(frames, T_init)
+    given = T_init is not None or frames[0].T_ref is not None or not has_board(frames) or any(
+        f.camera.mount is not None for f in frames)
+    T_init, T_ref = resolve_init(frames, T_init) if given else (None, None)
     if lidar is not None:
         if lidar.settings_key != lidar_settings_key(settings):
             raise SettingsError("the LiDAR steps given were done with other feature, motion "
@@ -104,11 +107,23 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         with _timed(timings, "rings", progress):
             # Rings from the sweeps as recorded (each return on its laser's cone about the
             # sensor); everything else from the sweeps de-skewed to the image time.
-            rings = sweep_rings(frames, settings, first_rings, [(frames[0].camera, T_init)])
+            rings = sweep_rings(frames, settings, first_rings,
+                                None if T_init is None else [(frames[0].camera, T_init)])
         with _timed(timings, "motion", progress):
             frames, motion_info = compensate_motion(frames, settings)
+    board = None
+    if has_board(frames) and any(f.camera.mount is not None for f in frames):
+        log.warning("a joint calibration of several cameras does not use the board yet: "
+                    "calibrate each camera alone (without --joint) to use it")
+    elif has_board(frames):
+        with _timed(timings, "board", progress):
+            board = board_start(frames, settings, rings, T_given=T_init)
+        timings.update({f"board_{k}": v for k, v in board.seconds.items()})
+        T_init, settings = _board_applied(board, T_init, settings)
+    if T_init is None:                  # resolve_init gave one unless the frames have a board
+        raise InputError("no initial extrinsic: the source has no T_cam_lidar; pass --init")
     wide = None
-    if wanted(settings):
+    if (board is None or not board.applied) and wanted(settings):
         if any(f.camera.mount is not None for f in frames):
             raise SettingsError(
                 "a joint calibration of several cameras does not take a wide start: calibrate "
@@ -135,7 +150,8 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
                 cost = CostModel.from_dict(dict(stored, probe=dict(
                     stored["probe"], source=f"checkpoint {checkpoint.path}")))
         stage = Stage(frames, T_init, T_init, settings, report("features"), rings, cost=cost,
-                      images=None if wide is None else wide.images)
+                      images=None if wide is None else wide.images,
+                      board=None if board is None else board.scene)
         warn_unlocated(frames, lidar_info)
         warn_rings(frames, rings)
         log_features(stage.feats)
@@ -143,7 +159,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     res, seeds = _search(stage, frames, T_init, settings, checkpoint, progress, timings)
     try:
         stage, X, F, basin, evaluations = _refine(stage, res, frames, rings, T_init, settings,
-                                                  progress, timings)
+                                                  progress, timings, board)
         with _timed(timings, "decision", progress):
             T, columns, costs, best = front_columns(stage, X, F, T_init, T_ref, settings)
             d = settings.decision
@@ -163,6 +179,11 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
             evidence = gather_evidence(stage.objective, settings, stage.n_min, stage.n_max,
                                        X[i], stage.sampling_px(),
                                        cameras=stage.camera_groups())
+            if board is not None and getattr(stage.objective, "board", None) is not None:
+                # The board's own evidence; its intervals are the result's (board.py).
+                board.evidence = board_evidence(stage.objective, X[i], settings,
+                                                stage.sampling_px())
+                evidence = dataclasses.replace(evidence, intervals=board.evidence.intervals)
             if wide is not None:
                 photo_check(wide, T[i])
                 # Kept in the result for what it did; its maps are no longer needed.
@@ -181,7 +202,7 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
         history=res.history, nsga_front=(res.X, res.F), quality=quality,
         objective=stage.objective, seed_poses=seeds, motion=motion_info,
         inputs=describe_inputs(frames, lidar_info, rings), sweeps=frames, evidence=evidence,
-        wide=wide)
+        wide=wide, board=board)
     result.reliability = reliability(result)
     measured = None if wide is None else wide.recording
     kind = _motion_check(frames, settings, measured is not None, result.reliability.ok)
@@ -201,15 +222,34 @@ def calibrate(source: str | Path | list[Frame], T_init: np.ndarray | None = None
     return result
 
 
+def _board_applied(board: BoardStart, T_init: np.ndarray | None,
+                   settings: Settings) -> tuple[np.ndarray, Settings]:
+    """The start and settings after the board stage: the board's start with
+    :func:`~paretocal.board.board_settings` when the board poses fix the extrinsic; else the
+    start given, with a warning; an :class:`~paretocal.errors.InputError` when there is
+    none."""
+    if board.T is not None:
+        if T_init is not None:
+            e = pose_error(board.T, T_init)
+            log.info("the board's start: %.2f deg / %.1f cm from the start given",
+                     float(e["rotation_deg"]), float(e["translation_cm"]))
+        return board.T, board_settings(settings)
+    if T_init is None:
+        raise InputError("no initial extrinsic: the source has no T_cam_lidar and the board "
+                         "does not give one (" + "; ".join(board.reasons) + "); pass --init")
+    log.warning("the board could not give the start: %s", "; ".join(board.reasons))
+    return T_init, settings
+
+
 def _motion_check(frames: list[Frame], settings: Settings, measured: bool, ok: bool) -> str:
     """How the verdict checks the result against the recording's motion
     (:mod:`paretocal.crosscheck`): ``"both"`` sensors' motion when the wide start measured it
     already (``measured``) or nothing else casts doubt on the result (``ok``), ``"lidar"``
     alone (whether the rig stands still) otherwise, and ``""`` not at all: with
     ``decision.motion_check`` off, fewer than :data:`~paretocal.crosscheck.MIN_FRAMES`
-    frames, or several cameras."""
+    frames, several cameras, or a board recording (its rig stands still by design)."""
     if (not settings.decision.motion_check or len(frames) < MIN_FRAMES
-            or any(f.camera.mount is not None for f in frames)):
+            or any(f.camera.mount is not None for f in frames) or has_board(frames)):
         return ""
     return "both" if ok or measured else "lidar"
 
@@ -218,6 +258,7 @@ def _motion_check(frames: list[Frame], settings: Settings, measured: bool, ok: b
 PHASES = {"load": "loading the frames", "lidar_pose": "locating the LiDAR",
           "rings": "recovering the LiDAR rings", "motion": "compensating the motion",
           "wide": "finding a wide start from the motion", "features": "extracting features",
+          "board": "finding the board in the images and the sweeps",
           "seed_grid": "scoring the seed grid",
           "polish": "polishing the front", "reselect": "re-selecting the points at the estimate",
           "decision": "choosing the solution", "verdict": "gathering the verdict's evidence",
@@ -312,7 +353,7 @@ def _search(stage: Stage, frames: list[Frame], T_init: np.ndarray, settings: Set
 
 
 def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
-            settings: Settings, progress, timings: dict):
+            settings: Settings, progress, timings: dict, board: BoardStart | None = None):
     """Polish the front, test the near/far basins, and re-select the feature points at the
     estimate. Returns ``(stage, X, F, basin, evaluations)`` (the stage after re-selection)."""
     X, F, evaluations, basin = res.X, res.F, res.evaluations, None
@@ -338,7 +379,7 @@ def _refine(stage: Stage, res, frames: list[Frame], rings, T_init: np.ndarray,
             T_est = stage.objective.transforms(X[np.argmin(F[:, 0])][None])[0]
             stage = Stage(frames, T_est, T_init, settings, rings=rings, cost=stage.cost,
                           view="after re-selecting points at the estimate",
-                          images=stage.images)
+                          images=stage.images, board=stage.board)
             X = X.copy()
             X[:, 6] = np.clip(X[:, 6], stage.n_min, stage.n_max)
             obj = stage.objective

@@ -19,6 +19,7 @@ from .search import VARIABLES
 from .verdict import Evidence, Reliability, reliability
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .board import BoardStart
     from .inputs import InputsReport, MotionReport
     from .stage import FeatureCounts
     from .wide import WideStart
@@ -103,6 +104,9 @@ class CalibrationResult:
         The verdict's own checks (restart, image-cloud agreement, per-axis intervals).
     wide : dict or None
         What the wide start did; None when the stated error did not ask for it.
+    board : BoardStart or None
+        What the board stage found (:class:`paretocal.board.BoardStart`); None for a recording
+        without a board.
     sweeps : list or None
         The frames as calibrated (de-skewed when the motion was compensated).
     objective : CalibrationObjective or None
@@ -143,6 +147,10 @@ class CalibrationResult:
     #: when the stated error did not ask for it. When it applied, ``T_init`` is the start it
     #: found and the settings hold the narrower stated error the calibration used from there.
     wide: WideStart | None = None
+    #: What the board stage found (:class:`paretocal.board.BoardStart`), None for a recording
+    #: without a board; written as ``board`` only when there is one. When it applied,
+    #: ``T_init`` is the start it found, with the narrower stated error of a wide start.
+    board: BoardStart | None = None
     #: The frames as calibrated (de-skewed when the motion was compensated); not in JSON.
     sweeps: list | None = None
     #: The final objective (feature points chosen at the estimate) and the grid seeds of the
@@ -187,6 +195,12 @@ class CalibrationResult:
 
     def to_dict(self) -> dict:
         """The ``result.json`` document (docs/conventions.md section 3)."""
+        doc = self._document()
+        if self.board is not None:
+            doc["board"] = self.board.to_dict()
+        return doc
+
+    def _document(self) -> dict:
         return {
             "T_cam_lidar": self.T_cam_lidar.tolist(),
             "T_init": self.T_init.tolist(),

@@ -167,16 +167,20 @@ class Stage:
     ``images``: the image features of an earlier stage of the same frames and settings
     (:attr:`images`), which do not depend on the pose. ``sampling``: measure the LiDAR's
     sampling step in the image (:meth:`sampling_px`; a stage that only searches skips it).
+    ``board``: the board's observations (:class:`paretocal.objective.board.BoardScene`, from
+    :func:`paretocal.board.board_start`): the objective then adds the board's terms to the
+    frames that show it (:class:`~paretocal.objective.board.BoardObjective`).
 
     Attributes: ``feats`` (search part of each frame's features), ``images`` (each frame's
     image features), ``scene``, ``holdout`` (held-out scene or None), ``n_min``, ``n_max``,
     ``cost`` (the measured cost model) and ``objective`` (corrections relative to ``T_init``).
     """
 
-    def __init__(self, frames: list[Frame], T_view: np.ndarray, T_init: np.ndarray,
-                 settings: Settings, progress=None, rings: list[Rings] | None = None,
-                 cost: CostModel | None = None, view: str | None = None,
-                 images: list | None = None, sampling: bool = True):
+    def __init__(self, frames: list[Frame], T_view: np.ndarray,  # noqa: PLR0913
+                 T_init: np.ndarray, settings: Settings, progress=None,
+                 rings: list[Rings] | None = None, cost: CostModel | None = None,
+                 view: str | None = None, images: list | None = None, sampling: bool = True,
+                 board=None):
         feats_all = prepare_features(frames, T_view, settings, progress, rings, images, sampling)
         self.images = [f.image for f in feats_all]
         if view is not None:
@@ -198,6 +202,11 @@ class Stage:
         self.objective = CalibrationObjective(self.scene, T_init, o, self.cost,
                                               [f.image.edge_uv for f in self.feats],
                                               ucb_k=settings.ucb_k)
+        self.board = board
+        if board is not None and board.n_boards:
+            from .objective.board import BoardObjective
+
+            self.objective = BoardObjective(self.objective, board)
 
     def sampling_px(self, frames=None) -> np.ndarray | None:
         """The LiDAR's sampling step in the image, (2,) px along a ring and between rings:

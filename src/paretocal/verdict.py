@@ -1491,6 +1491,9 @@ def reliability(result: "CalibrationResult") -> Reliability:
     if short:
         reasons.append(short)
     reasons += _cross_reasons(ev.motion, None if wide is None else wide.photo, n_frames)
+    board = getattr(result, "board", None)
+    if board is not None:
+        reasons += board.verdict_reasons()
     ct = ev.contrast
     # A z that is not a number (random poses that all score alike: no spread to compare
     # with) is no evidence of agreement either.
@@ -1508,7 +1511,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
                        "belongs to its cloud (same time, same camera), the intrinsics, and "
                        "that the scenes have edges both sensors see")
     if iv is not None and not reasons:
-        wide = _imprecise(iv)
+        wide = _imprecise(iv, board is not None)
         if wide:
             reasons.append(wide)
     few = _few_edges(counts)
@@ -1611,9 +1614,10 @@ def _few_edges(feature_counts: FeatureCounts | None) -> str | None:
             "parked cars)")
 
 
-def _imprecise(iv: Intervals) -> str | None:
+def _imprecise(iv: Intervals, board: bool = False) -> str | None:
     """The reason to distrust a result whose intervals are wider than a usable calibration
-    allows (:data:`RELIABLE_MAX_HALF_CM`, :data:`RELIABLE_MAX_HALF_DEG`), or None."""
+    allows (:data:`RELIABLE_MAX_HALF_CM`, :data:`RELIABLE_MAX_HALF_DEG`), or None; ``board``:
+    the advice is a board recording's (:data:`paretocal.board.RECORD_ADVICE`)."""
     limit = {"cm": RELIABLE_MAX_HALF_CM, "deg": RELIABLE_MAX_HALF_DEG}
     units = dict(zip(AXES, UNITS))
     wide = [f"{a} +-{h:.2g} {units[a]}" for a, h in iv.half_width_report().items()
@@ -1628,10 +1632,16 @@ def _imprecise(iv: Intervals) -> str | None:
         why = (f"; the LiDAR samples this camera's view coarsely (neighbouring returns "
                f"{samp[0]:.2g} px apart along a ring and {samp[1]:.2g} px between rings), so "
                "no frame places an edge closer than half that")
+    if board:
+        from .board import RECORD_ADVICE
+
+        advice = RECORD_ADVICE
+    else:
+        advice = ("add frames with structure near the rig and across the whole image (poles, "
+                  "building corners, cars at several distances)")
     return (f"the data fix the result only to {', '.join(loose)} (95 %; a usable calibration "
-            f"needs {RELIABLE_MAX_HALF_CM:g} cm and {RELIABLE_MAX_HALF_DEG:g} deg){why}: add "
-            "frames with structure near the rig and across the whole image (poles, building "
-            "corners, cars at several distances), or keep the start if it was measured better")
+            f"needs {RELIABLE_MAX_HALF_CM:g} cm and {RELIABLE_MAX_HALF_DEG:g} deg){why}: "
+            f"{advice}, or keep the start if it was measured better")
 
 
 def verdict_text(rel: Reliability) -> str:

@@ -78,6 +78,8 @@ def check(
     typer.echo(f"paretocal: {features_line(r.features)}")
     if r.motion is not None:
         typer.echo(f"paretocal: {motion_line(r.motion)}")
+    if r.board is not None:
+        typer.echo(f"paretocal: {board_line(r.board)}")
     for note in r.notes:
         typer.echo(f"paretocal: WEAK CHECK: {note}")
 
@@ -116,6 +118,19 @@ def features_line(features: FeatureCounts) -> str:
     if noise:
         line += (f"; the depth edges of {len(noise)} frame(s) look like noise (frame "
                  f"{noise[0].frame}: {noise[0].reason})")
+    return line
+
+
+def board_line(board: dict) -> str:
+    """What the board gave a check, in one line (:func:`paretocal.board.board_summary`)."""
+    n = board["frames_total"]
+    line = (f"board: in {board['found_in_images']} of {n} images and "
+            f"{board['found_in_clouds']} of {n} sweeps, {board['used']} in the objective")
+    if board.get("board_optimum_moved_deg") is not None:
+        line += (f"; the board alone prefers a pose {board['board_optimum_moved_deg']:.3f} deg / "
+                 f"{board['board_optimum_moved_cm']:.2f} cm away")
+    if board.get("reasons"):
+        line += "; " + "; ".join(board["reasons"])
     return line
 
 

@@ -69,6 +69,8 @@ def run_calibration(loaded, source, T_init, settings, out: Path, figures: bool, 
 
     if ref is not None:
         typer.echo(f"paretocal: error vs reference per axis (LiDAR frame): {_fmt_axes(ref)}")
+    if result.board is not None:
+        typer.echo(f"paretocal: {result.board.summary_line()}")
     rel = result.reliability
     if rel is None:                     # the pipeline judges every result it returns
         raise ParetocalError(f"{out}: the run's result carries no verdict")

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
+from .board import Board
 
 
 @dataclass(eq=False)
@@ -56,6 +57,9 @@ class Frame:
         What the dataset states about itself, as its source does (calib.yaml's
         ``init_error`` as ``(deg, m)``; :func:`paretocal.io.source_options`): frames loaded
         from a folder are calibrated with it as the folder itself is.
+    board : Board or None
+        The checkerboard the frames show (calib.yaml's ``board:`` or a ``board.yaml`` beside
+        it); None for a recording without one.
     """
 
     name: str
@@ -73,6 +77,7 @@ class Frame:
     mask: np.ndarray | None = None
     credit: str | None = None
     options: dict = field(default_factory=dict)
+    board: Board | None = None
 
     @property
     def size(self) -> tuple[int, int]:

@@ -19,6 +19,7 @@ from ..camera import MAX_XI, Camera
 from ..errors import PATH_CHARS, InputError, SettingsError, excerpt, first_line, key_list, quote
 from ..geometry import check_rigid
 from .bags import extract_hint, is_bag
+from .board import Board, read_board
 from .frame import Frame
 from .paths import kind_of, missing, not_found
 from .clouds import BIN_LAYOUTS, POINT_SUFFIXES, read_cloud
@@ -51,6 +52,8 @@ class FrameFiles:
     bin_layout: str | None = None
     #: The data's credit line for figures (KITTI's for KITTI, calib.yaml ``credit``), or None.
     credit: str | None = None
+    #: The checkerboard in view (calib.yaml ``board``, or board.yaml beside it), or None.
+    board: Board | None = None
 
 
 @dataclass
@@ -491,9 +494,33 @@ def _folder(root: Path) -> Source:
     options = _options(cpath, data)
     pairs = _pair(root, root / "images", root / "points")
     credit = _credit(cpath, data)
+    board = folder_board(root, cpath, data)
     return Source("folder", root, [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=pose,
-                                              bin_layout=layout, credit=credit)
+                                              bin_layout=layout, credit=credit, board=board)
                                    for s, i, p in pairs], options)
+
+
+#: The file beside calib.yaml that may describe the board instead of its ``board:`` section.
+BOARD_FILE = "board.yaml"
+
+
+def folder_board(root: Path, cpath: Path, data: dict, where: str = "board") -> Board | None:
+    """The board of a generic folder: calib.yaml's ``board:`` section (``where`` in it), or
+    the ``board:`` section of a ``board.yaml`` beside calib.yaml; None when neither is
+    given. Both at once are refused (which one is meant cannot be guessed)."""
+    bpath = root / BOARD_FILE
+    beside = kind_of(bpath) is not None or bpath.is_symlink()
+    if data.get("board") is not None:
+        if beside and where == "board":
+            raise InputError(f"{cpath}: board is given here and in {bpath}; keep one")
+        return read_board(data["board"], cpath, where)
+    if not beside or where != "board":
+        return None
+    doc = read_mapping(bpath)
+    check_keys(bpath, doc, ("board",))
+    if doc.get("board") is None:
+        raise InputError(f"{bpath}: missing 'board' section (kind, squares, square_m, size_m)")
+    return read_board(doc["board"], bpath)
 
 
 def _credit(cpath: Path, data: dict) -> str | None:
@@ -507,12 +534,12 @@ def _credit(cpath: Path, data: dict) -> str | None:
 
 
 #: The keys of one entry of a rig calib.yaml's ``cameras``.
-RIG_CAMERA_KEYS = ("name", "camera", "camera_info", "mask", "T_cam_lidar", "images")
+RIG_CAMERA_KEYS = ("name", "camera", "camera_info", "mask", "T_cam_lidar", "images", "board")
 #: The keys of a calib.yaml: a single camera's (:func:`_folder`) and a rig's top level
 #: (:func:`rig_cameras`), and those of a ``camera`` section in the K / width / height form.
 CALIB_KEYS = ("camera", "camera_info", "T_cam_lidar", "lidar_pose", "points", "mask",
-              "init_error", "credit")
-RIG_KEYS = ("cameras", "lidar_pose", "points", "init_error", "credit")
+              "init_error", "credit", "board")
+RIG_KEYS = ("cameras", "lidar_pose", "points", "init_error", "credit", "board")
 CAMERA_KEYS = ("K", "width", "height", "model", "D", "xi", "mask")
 
 
@@ -600,8 +627,11 @@ def _rig_camera(root: Path, cpath: Path, name: str, entry: dict, shared: dict) -
         raise InputError(f"{cpath}: {prefix}.images: folder {excerpt(image_dir, PATH_CHARS)} "
                          f"{missing(image_dir, 'a folder')}")
     pairs = _pair(root, image_dir, root / "points")
+    board = (read_board(entry["board"], cpath, f"{prefix}.board")
+             if entry.get("board") is not None else shared["board"])
     frames = [FrameFiles(s, i, p, camera, T_ref, mask, sensor_pose=shared["pose"],
-                         bin_layout=shared["layout"], credit=shared["credit"]) for s, i, p in pairs]
+                         bin_layout=shared["layout"], credit=shared["credit"], board=board)
+              for s, i, p in pairs]
     return Source("folder", root, frames, dict(shared["options"], rig_camera=name))
 
 
@@ -631,7 +661,8 @@ def rig_cameras(source: str | Path) -> list[tuple[str, Source]]:
                          "given; with several cameras each entry of cameras holds its own")
     shared: dict[str, Any] = {
         "pose": None, "layout": _points_layout(cpath, data.get("points")),
-        "options": _options(cpath, data), "credit": _credit(cpath, data)}
+        "options": _options(cpath, data), "credit": _credit(cpath, data),
+        "board": folder_board(root, cpath, data)}
     if data.get("lidar_pose") is not None:
         shared["pose"] = check_rigid(data["lidar_pose"], str(cpath), key="lidar_pose")
     return [(name, _rig_camera(root, cpath, name, entry, shared)) for name, entry in entries]
@@ -827,7 +858,7 @@ def read_frame(files: FrameFiles, clouds: dict | None = None) -> Frame:
     return Frame(files.name, image, cloud.points, cam, files.T_ref, files.image_path,
                  files.points_path, kitti_rect=files.kitti_rect, mask=mask, ring=cloud.ring,
                  time=cloud.time, point_fields=dict(cloud.fields),
-                 sensor_pose=files.sensor_pose, credit=files.credit)
+                 sensor_pose=files.sensor_pose, credit=files.credit, board=files.board)
 
 
 def load_frames(source: str | Path | Source, frames: str | None = None,
