@@ -114,7 +114,7 @@ def test_bad_boards_are_one_line_naming_the_key(section, expect):
 
 
 def test_bad_boards_exit_2_from_the_command_line(data, tmp_path, capfd):
-    from helpers import bad_cli
+    from .helpers import bad_cli
 
     bad = variant(lce(data, "walkway_b"), tmp_path / "v",
                   edit=lambda c: c["board"].update(squares=[9, 1]))
@@ -198,7 +198,7 @@ SYNTH_NEAR = {"pinhole": 1.0, "fisheye": 0.5, "mei": 0.35}
                                           ((0.9, 0.3, 1.5), (30, -20, 25)),
                                           ((-1.3, -0.3, 1.2), (-15, 25, -10))])
 def test_an_exact_board_is_found_through_every_lens_model(model, centre, tilt):
-    from helpers import render_board
+    from .helpers import render_board
 
     from paretocal.camera import Camera
     from paretocal.features.board import find_board
@@ -218,7 +218,7 @@ def test_an_exact_board_is_found_through_every_lens_model(model, centre, tilt):
 
 
 def test_the_perspective_view_maps_corners_back_through_the_lens():
-    from helpers import render_board
+    from .helpers import render_board
 
     import cv2
 
@@ -422,7 +422,7 @@ def test_a_board_recording_calibrates_from_no_guess_through_the_command_line(dat
     board's stages timed; result.json says what the board gave."""
     import json
 
-    from helpers import run_cli
+    from .helpers import run_cli
 
     from paretocal.geometry import pose_error
 

@@ -1349,6 +1349,23 @@ def gather_evidence(objective, settings, n_min: int, n_max: int, x: np.ndarray,
                  if cameras is not None and len(cameras) > 1 else None))
 
 
+def _camera_reasons(cameras: "CameraAgreement | None") -> list[str]:
+    """A reason for each camera of a joint calibration whose frames alone disagree."""
+    if cameras is None:
+        return []
+    out = []
+    for name in cameras.disagreeing:
+        c = next(c for c in cameras.cameras if c.name == name)
+        out.append(
+            f"the cameras disagree: camera {name}'s frames alone prefer a pose "
+            f"{c.separation_deg:.2g} deg / {cm_written(c.separation_m, 3):.2g} cm away, moving its "
+            f"points {c.own_optimum_px:.2g} px (its edges are trusted to "
+            f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
+            "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
+            "(without --joint) and compare")
+    return out
+
+
 def reliability(result: "CalibrationResult") -> Reliability:
     """A short verdict on whether to trust ``result``, from what the run already computed.
 
@@ -1477,16 +1494,7 @@ def reliability(result: "CalibrationResult") -> Reliability:
                        "(buildings, poles, cars at several distances)"
                        + _narrower_advice(x, r.correction, s.init_error_deg,
                                           s.init_error_m))
-    checks = () if ev.cameras is None else ev.cameras.cameras
-    for name in () if ev.cameras is None else ev.cameras.disagreeing:
-        c = next(c for c in checks if c.name == name)
-        reasons.append(
-            f"the cameras disagree: camera {name}'s frames alone prefer a pose "
-            f"{c.separation_deg:.2g} deg / {cm_written(c.separation_m, 3):.2g} cm away, moving its "
-            f"points {c.own_optimum_px:.2g} px (its edges are trusted to "
-            f"{c.tolerance_px:.2g} px): a bias that camera's frames share, or calib.yaml's "
-            "camera-to-camera extrinsics are not the rig's; calibrate the cameras one by one "
-            "(without --joint) and compare")
+    reasons += _camera_reasons(ev.cameras)
     short = _short_of_optimum(ev)
     if short:
         reasons.append(short)
