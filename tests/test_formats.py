@@ -841,7 +841,7 @@ def test_the_docs_calib_examples_load(tmp_path, raw_frames):
     text = (Path(__file__).parents[1] / "docs" / "preparing-data.md").read_text(encoding="utf-8")
     part = text[text.index("### calib.yaml for one camera"):text.index("### Camera models")]
     blocks = re.findall(r"```yaml\n(.*?)```", part, re.S)
-    assert len(blocks) == 3
+    assert len(blocks) == 4
     f = raw_frames[0]
     for k, block in enumerate(blocks):
         doc = yaml.safe_load(block)
